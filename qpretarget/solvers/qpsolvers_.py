@@ -1,0 +1,99 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Adapter to every solver qpsolvers knows (osqp, quadprog, daqp, clarabel, ...), for comparisons.
+
+qpsolvers calls are stateless (no warm start): this backend is for comparing solvers, the native
+:class:`~qpretarget.solvers.proxsuite_.ProxSuiteSolver` is the one to run in a loop.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import qpsolvers
+
+from ..errors import SolverNotInstalledError
+from ..problem import QPProblem
+from .base import QPSolution, QPSolver
+
+#: Tolerances set explicitly so results are comparable (qpsolvers' own defaults differ widely).
+DEFAULT_OPTIONS: dict[str, dict[str, Any]] = {
+    "osqp": {"eps_abs": 1e-7, "eps_rel": 1e-7, "polish": True, "max_iter": 20000},
+    "proxqp": {"eps_abs": 1e-9, "eps_rel": 0.0},
+    "clarabel": {"tol_gap_abs": 1e-9, "tol_gap_rel": 1e-9, "tol_feas": 1e-9},
+    "piqp": {"eps_abs": 1e-9, "eps_rel": 1e-9},
+    "daqp": {},
+    "quadprog": {},
+}
+
+
+def known_qpsolvers() -> list[str]:
+    """Names of every solver qpsolvers supports (installed or not)."""
+    names = set(getattr(qpsolvers, "solvers", {}).__dict__.get("available_solvers", []))
+    names |= set(qpsolvers.available_solvers)
+    try:
+        from qpsolvers.solvers import sparse_solvers, dense_solvers  # noqa: F401
+
+        names |= set(dense_solvers) | set(sparse_solvers)
+    except Exception:  # pragma: no cover - older qpsolvers
+        pass
+    names |= {"clarabel", "cvxopt", "daqp", "ecos", "gurobi", "highs", "hpipm", "jaxopt_osqp",
+              "kvxopt", "mosek", "osqp", "piqp", "proxqp", "qpalm", "qpoases", "qpswift",
+              "quadprog", "scs", "sip"}  # fmt: skip
+    return sorted(names)
+
+
+def installed_qpsolvers() -> list[str]:
+    """Names of the qpsolvers backends installed here."""
+    return sorted(qpsolvers.available_solvers)
+
+
+class QpsolversSolver(QPSolver):
+    """Solve with ``qpsolvers.solve_problem(problem, solver=name)``.
+
+    Args:
+        solver: qpsolvers solver name.
+        **options: solver options, on top of :data:`DEFAULT_OPTIONS`.
+
+    Raises:
+        SolverNotInstalledError: when the solver's package is not installed.
+    """
+
+    def __init__(self, solver: str, **options: Any) -> None:
+        if solver not in qpsolvers.available_solvers:
+            raise SolverNotInstalledError(
+                f"QP solver {solver!r} is known to qpsolvers but not installed here "
+                f"(installed: {', '.join(installed_qpsolvers())}). Install it with "
+                f"`pip install qpsolvers[{solver}]` or `pip install {solver}`."
+            )
+        self.name = solver  # type: ignore[misc]
+        self.options = {**DEFAULT_OPTIONS.get(solver, {}), **options}
+
+    def settings_summary(self) -> dict[str, Any]:
+        return dict(self.options)
+
+    def solve(self, problem: QPProblem) -> QPSolution:
+        t0 = time.perf_counter()
+        parts = problem.split()
+        qp = qpsolvers.Problem(**parts)
+        try:
+            sol = qpsolvers.solve_problem(qp, solver=self.name, **self.options)
+        except Exception as exc:  # a backend error is a failed tick, not a crash of the loop
+            return QPSolution(None, False, f"error: {exc}", solve_time=time.perf_counter() - t0)
+        x = sol.x if sol.x is not None and np.all(np.isfinite(sol.x)) else None
+        iters = -1
+        extras = getattr(sol, "extras", {}) or {}
+        info = extras.get("info")
+        if info is not None and hasattr(info, "iter"):
+            iters = int(info.iter)
+        elif "iter" in extras:
+            iters = int(extras["iter"])
+        ok = bool(sol.found) if sol.found is not None else x is not None
+        return QPSolution(
+            x=x,
+            success=ok and x is not None,
+            status="solved" if ok else "failed",
+            iterations=iters,
+            solve_time=time.perf_counter() - t0,
+        )

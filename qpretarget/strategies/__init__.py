@@ -1,0 +1,7 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Task-management strategies, registered under their YAML ``type:`` in :data:`STRATEGIES`."""
+
+from .augmentation import Augmentation
+from .base import STRATEGIES, Strategy, StrategyResult, TickProblem
+
+__all__ = ["STRATEGIES", "Strategy", "StrategyResult", "TickProblem", "Augmentation"]

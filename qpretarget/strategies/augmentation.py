@@ -1,0 +1,68 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Task augmentation (Dariush 2009 4.3.1): every task in one weighted least-squares QP.
+
+.. math::
+    \min_v \tfrac12 \sum_i w_i |J_i v - v^*_i|^2 + \tfrac12 \lambda^2 v^\top W v
+    \quad \text{s.t. hard constraints}
+
+assembled with one matrix product, :math:`H = \bar J^\top \bar J + \lambda^2 W`,
+:math:`g = -\bar J^\top \bar r`, where :math:`\bar J` stacks :math:`\sqrt{w_i} J_i` and
+:math:`\bar r` stacks :math:`\sqrt{w_i} v^*_i`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..problem import QPProblem
+from ..robot import RobotModel
+from .base import STRATEGIES, Strategy, StrategyResult, TickProblem, solution_to_result
+
+
+@STRATEGIES.register("augmentation")
+class Augmentation(Strategy):
+    """One weighted QP for all tasks; ``level`` is ignored."""
+
+    def __init__(self) -> None:
+        self._problem: QPProblem | None = None
+
+    def bind(self, robot: RobotModel, task_dims, n_rows, solver_factory) -> None:  # noqa: ANN001
+        super().bind(robot, task_dims, n_rows, solver_factory)
+        m = sum(d for _, d, _ in task_dims)
+        self._Jw = np.zeros((m, robot.nv))
+        self._rw = np.zeros(m)
+        self._problem = QPProblem(robot.nv, n_rows)
+        self._solver = solver_factory()
+
+    def reset(self) -> None:
+        self._solver.reset()
+
+    def solvers(self):  # noqa: ANN201
+        return [self._solver]
+
+    def assemble(self, tp: TickProblem) -> QPProblem:
+        """Fill the QP of this tick (exposed for tests and solver comparisons)."""
+        Jw, rw, p = self._Jw, self._rw, self._problem
+        i = 0
+        for b in tp.blocks:
+            k = b.J.shape[0]
+            sw = np.sqrt(b.weight)
+            np.multiply(b.J, sw[:, None], out=Jw[i : i + k])
+            np.multiply(b.v_star, sw, out=rw[i : i + k])
+            i += k
+        np.matmul(Jw.T, Jw, out=p.H)
+        lam2 = tp.damping * tp.damping
+        if lam2 > 0:
+            p.H += lam2 * tp.W
+        np.matmul(Jw.T, rw, out=p.g)
+        np.negative(p.g, out=p.g)
+        if p.n_in:
+            p.C[...] = tp.C
+            p.l[...] = tp.l
+            p.u[...] = tp.u
+        p.lb[...] = tp.lb
+        p.ub[...] = tp.ub
+        return p
+
+    def solve(self, tp: TickProblem) -> StrategyResult:
+        return solution_to_result(self._solver.solve(self.assemble(tp)))

@@ -1,0 +1,106 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Strategy interface: turn this tick's cost blocks and constraint rows into one or several QPs.
+
+Tasks and constraints never call a solver; a strategy decides how their blocks become QPs
+(augmentation: one weighted QP; hierarchy: one QP per priority level) and which solver solves them.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..registry import Registry
+from ..robot import RobotModel, RobotState
+from ..solvers import QPSolution, QPSolver
+from ..tasks import CostBlock
+
+STRATEGIES = Registry("strategy")
+
+
+@dataclass(slots=True)
+class TickProblem:
+    """Everything a strategy needs for one tick.
+
+    Attributes:
+        state: kinematics of the configuration the tick starts from.
+        dt: tick length [s].
+        blocks: cost blocks of every task, in YAML order.
+        C, l, u: stacked constraint rows (fixed shape, inactive rows with infinite bounds).
+        lb, ub: merged box bounds on the variable.
+        W: regularization metric (nv, nv); damping: its lambda.
+        tick: tick counter.
+    """
+
+    state: RobotState
+    dt: float
+    blocks: list[CostBlock]
+    C: np.ndarray
+    l: np.ndarray
+    u: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+    W: np.ndarray
+    damping: float
+    tick: int
+
+
+@dataclass(slots=True)
+class StrategyResult:
+    """Solution of a tick's QP(s).
+
+    Attributes:
+        x: decision variable (v at velocity level), or ``None`` on failure.
+        success: every QP solved.
+        status: solver status text (of the failing level, if any).
+        iterations: total solver iterations.
+        solve_time: total solver time [s].
+        levels: per-level details (hierarchy).
+    """
+
+    x: np.ndarray | None
+    success: bool
+    status: str
+    iterations: int = 0
+    solve_time: float = 0.0
+    levels: list[dict[str, Any]] = field(default_factory=list)
+
+
+class Strategy(abc.ABC):
+    """A task-management scheme."""
+
+    type_name: ClassVar[str] = "strategy"
+
+    def bind(self, robot: RobotModel, task_dims: list[tuple[str, int, int]], n_rows: int, solver_factory: Any) -> None:
+        """Preallocate for tasks ``(name, dim, level)``, ``n_rows`` constraint rows.
+
+        ``solver_factory()`` returns a new :class:`QPSolver` (one per QP that needs its own warm
+        start).
+        """
+        self.robot = robot
+        self.nv = robot.nv
+        self.task_dims = task_dims
+        self.n_rows = n_rows
+        self.solver_factory = solver_factory
+
+    @abc.abstractmethod
+    def solve(self, tp: TickProblem) -> StrategyResult:
+        """Solve this tick."""
+
+    def reset(self) -> None:
+        """Drop warm starts."""
+
+    def solvers(self) -> list[QPSolver]:
+        """The solver instances in use."""
+        return []
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+def solution_to_result(sol: QPSolution) -> StrategyResult:
+    """Wrap a single QP solution."""
+    return StrategyResult(sol.x, sol.success, sol.status, max(sol.iterations, 0), sol.solve_time)

@@ -1,0 +1,175 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Task base class: a cost module contributing the rows :math:`\sqrt{w}(J v - v^*)` of one tick.
+
+Every task computes an error :math:`e` (target minus current, so that :math:`J v = K e` reduces it)
+and a Jacobian :math:`J`; the base class turns them into the closed-loop inverse kinematics
+reference velocity of Dariush 2009 eq. 9 / CRAC eq. 15,
+
+.. math:: v^* = \dot x_d + K e,
+
+with :math:`K` the task gain [1/s]. In discrete time :math:`K\,dt` is capped at 1 (full correction
+of the error in one tick), above which the loop would overshoot.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..errors import ConfigError, TargetError
+from ..registry import Registry
+from ..robot import RobotModel, RobotState
+from ..validation import positive_float, weight_vector
+
+TASKS = Registry("task")
+
+
+@dataclass(frozen=True, slots=True)
+class CostBlock:
+    """Rows ``sqrt(w) * (J v - v_star)`` of one task for this tick (Dariush 2009 eq. 9).
+
+    Attributes:
+        task: task name (YAML), reused in errors, metrics and logs.
+        J: (k, nv) task Jacobian.
+        v_star: (k,) reference task velocity.
+        weight: (k,) non-negative weights (already scaled by the task's presence).
+        level: priority level (1 = highest); augmentation ignores it, hierarchy sorts by it.
+        error: (k,) task error ``target - current`` at the start of the tick.
+    """
+
+    task: str
+    J: np.ndarray
+    v_star: np.ndarray
+    weight: np.ndarray
+    level: int
+    error: np.ndarray
+
+
+class Task(abc.ABC):
+    """A cost module. Subclasses implement :meth:`bind`, :meth:`compute_error`,
+    :meth:`compute_jacobian` and :meth:`set_target`; the base class builds the QP block.
+
+    Args:
+        name: task name, the key of its target in :meth:`Controller.step`.
+        weight: scalar or per-row weight ``w`` [cost]/[task unit]^2.
+        gain: task gain ``K`` [1/s] of Dariush 2009 eq. 9; ``None`` corrects the whole error in
+            one tick (``K = 1/dt``).
+        level: priority level (1 = highest) used by the ``hierarchy`` strategy.
+        feedforward: add the target's finite-difference velocity as :math:`\dot x_d`.
+        recovery_time: after a missing (NaN) target, the weight ramps back to full over this
+            time [s] instead of jumping.
+    """
+
+    type_name: ClassVar[str] = "task"
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        weight: Any = 1.0,
+        gain: float | None = None,
+        level: int = 1,
+        feedforward: bool = False,
+        recovery_time: float = 0.2,
+    ) -> None:
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"a task needs a non-empty string `name`, got {name!r}.")
+        self.name = name
+        self._weight_spec = weight
+        self.gain = None if gain is None else positive_float(gain, "gain [1/s]")
+        if isinstance(level, bool) or not isinstance(level, int) or level < 1:
+            raise ConfigError(f"level must be an integer >= 1, got {level!r}.")
+        self.level = level
+        self.feedforward = bool(feedforward)
+        self.recovery_time = positive_float(recovery_time, "recovery_time [s]", allow_zero=True)
+        self.presence = 1.0  # 0 while the target is missing, ramps back to 1
+        self.dim = 0
+        self.weight = np.zeros(0)
+        self._ff = None  # target velocity estimate (k,)
+        self.robot: RobotModel | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+    def bind(self, robot: RobotModel, *, path: str = "") -> None:
+        """Resolve names to ids and fix the task dimension; raise here on bad names."""
+        self.robot = robot
+        self.weight = weight_vector(self._weight_spec, self.dim, f"{path}.weight" if path else "weight")
+
+    def reset(self, state: RobotState) -> None:
+        """Set the target to the current value (zero error) and forget history."""
+        self.presence = 1.0
+        self._ff = None
+
+    # ------------------------------------------------------------------ targets
+    @abc.abstractmethod
+    def set_target(self, target: Any, *, tick: int | None = None) -> None:
+        """Validate, copy and store a target. Raise :class:`TargetError` on a bad shape/type."""
+
+    def mark_missing(self) -> None:
+        """The target of this tick is missing (NaN): weight zero, then a smooth ramp back."""
+        self.presence = 0.0
+
+    # ------------------------------------------------------------------ maths
+    @abc.abstractmethod
+    def compute_error(self, state: RobotState) -> np.ndarray:
+        """Task error ``target - current`` (k,)."""
+
+    @abc.abstractmethod
+    def compute_jacobian(self, state: RobotState) -> np.ndarray:
+        """Task Jacobian (k, nv): ``J v`` is the task-space velocity."""
+
+    def compute_jdot_v(self, state: RobotState) -> np.ndarray:
+        r"""Drift term :math:`\dot J v` (k,) for acceleration-level control (CRAC eq. 9)."""
+        return np.zeros(self.dim)
+
+    def error_norm(self, error: np.ndarray) -> float:
+        """Scalar error reported in :class:`StepResult` (Euclidean norm by default)."""
+        return float(np.linalg.norm(error))
+
+    def effective_gain(self, dt: float) -> float:
+        """``K`` with ``K dt`` capped at 1."""
+        k = 1.0 / dt if self.gain is None else self.gain
+        return min(k, 1.0 / dt)
+
+    def block(self, state: RobotState, dt: float) -> CostBlock:
+        """This tick's cost rows (Dariush 2009 eq. 9: ``v* = v_d + K e``)."""
+        e = self.compute_error(state)
+        J = self.compute_jacobian(state)
+        v_star = self.effective_gain(dt) * e
+        if self.feedforward and self._ff is not None:
+            v_star = v_star + self._ff
+        w = self.weight
+        if self.presence < 1.0:
+            w = w * self.presence
+            rate = dt / self.recovery_time if self.recovery_time > 0 else 1.0
+            self.presence = min(1.0, self.presence + rate)
+        return CostBlock(self.name, J, v_star, w, self.level, e)
+
+    def __repr__(self) -> str:
+        return (
+            f"{type(self).__name__}(name={self.name!r}, weight={self._weight_spec!r}, "
+            f"gain={self.gain!r}, level={self.level})"
+        )
+
+
+def as_finite_array(value: Any, shape: tuple[int, ...], *, task: str, tick: int | None, what: str) -> np.ndarray | None:
+    """Return ``value`` as a float array of ``shape``; ``None`` if it holds NaN (missing data).
+
+    Raises:
+        TargetError: when the shape or type is wrong.
+    """
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise TargetError(
+            f"{what} must be an array of shape {shape}, got {type(value).__name__}.",
+            task=task,
+            tick=tick,
+        ) from None
+    if arr.shape != shape:
+        raise TargetError(f"{what} must have shape {shape}, got {arr.shape}.", task=task, tick=tick)
+    if not np.all(np.isfinite(arr)):
+        return None
+    return arr

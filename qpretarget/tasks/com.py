@@ -1,0 +1,86 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Centre-of-mass task: :math:`e = c_r - c`, :math:`J = J_{com}` (rows of the chosen axes)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError, TargetError
+from ..robot import RobotModel, RobotState
+from .base import TASKS, Task
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+@TASKS.register("com")
+class ComTask(Task):
+    """Track the centre of mass (all axes or a subset, e.g. ``axes: xy`` for the ground projection).
+
+    Args:
+        name: task name.
+        axes: which world axes are tracked, a string of ``x``, ``y``, ``z``.
+        weight: weight [cost]/[m]^2 (scalar or one per axis).
+        **kwargs: ``gain``, ``level``, ``feedforward``, ``recovery_time`` of :class:`Task`.
+    """
+
+    def __init__(
+        self,
+        name: str = "com",
+        *,
+        axes: str = "xyz",
+        weight: Any = 1.0,
+        gain: float | None = None,
+        level: int = 1,
+        feedforward: bool = False,
+        recovery_time: float = 0.2,
+    ) -> None:
+        super().__init__(
+            name, weight=weight, gain=gain, level=level, feedforward=feedforward,
+            recovery_time=recovery_time,
+        )  # fmt: skip
+        if not isinstance(axes, str) or not axes or any(a not in _AXES for a in axes) or len(set(axes)) != len(axes):
+            raise ConfigError(f"axes must be a string of distinct letters among x, y, z, got {axes!r}.")
+        self.axes = axes
+        self.rows = np.array([_AXES[a] for a in axes], dtype=int)
+        self.dim = len(self.rows)
+        self.target = np.zeros(3)
+
+    def bind(self, robot: RobotModel, *, path: str = "") -> None:
+        super().bind(robot, path=path)
+
+    def reset(self, state: RobotState) -> None:
+        super().reset(state)
+        self.target = state.com().copy()
+
+    def set_target(self, target: Any, *, tick: int | None = None) -> bool:
+        """Set the CoM target: a 3-vector, or ``len(axes)`` values for the tracked axes."""
+        try:
+            arr = np.array(target, dtype=float)
+        except (TypeError, ValueError):
+            raise TargetError(f"CoM target must be numbers, got {type(target).__name__}.", task=self.name, tick=tick) from None
+        if arr.shape == (3,):
+            full = arr
+        elif arr.shape == (self.dim,):
+            full = self.target.copy()
+            full[self.rows] = arr
+        else:
+            raise TargetError(
+                f"CoM target must have shape (3,) or ({self.dim},) for axes {self.axes!r}, got {arr.shape}.",
+                task=self.name,
+                tick=tick,
+            )
+        if not np.all(np.isfinite(full[self.rows])):
+            return False
+        self.target = full
+        return True
+
+    def compute_error(self, state: RobotState) -> np.ndarray:
+        return (self.target - state.com())[self.rows]
+
+    def compute_jacobian(self, state: RobotState) -> np.ndarray:
+        return state.com_jacobian()[self.rows]
+
+    def __repr__(self) -> str:
+        return f"ComTask(axes={self.axes!r}, name={self.name!r}, weight={self._weight_spec!r}, gain={self.gain!r}, level={self.level})"

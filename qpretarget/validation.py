@@ -1,0 +1,32 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Small validators turning user values into checked floats and arrays with clear messages."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .errors import ConfigError
+
+
+def positive_float(value: Any, name: str, *, allow_zero: bool = False) -> float:
+    """Return ``value`` as a float > 0 (or >= 0), else raise :class:`ConfigError`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise ConfigError(f"{name} must be a number, got {value!r}.")
+    v = float(value)
+    if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        bound = ">= 0" if allow_zero else "> 0"
+        raise ConfigError(f"{name} must be a finite number {bound}, got {value!r}.")
+    return v
+
+
+def weight_vector(value: npt.ArrayLike, dim: int, name: str) -> np.ndarray:
+    """Return a (dim,) non-negative weight vector from a scalar or a sequence."""
+    arr = np.asarray(value, dtype=float) if not isinstance(value, str) else None
+    if arr is None or arr.ndim > 1 or (arr.ndim == 1 and arr.shape[0] != dim):
+        raise ConfigError(f"{name} must be a number or a list of {dim} numbers, got {value!r}.")
+    if np.any(~np.isfinite(arr)) or np.any(arr < 0):
+        raise ConfigError(f"{name} must be finite and >= 0, got {value!r}.")
+    return np.broadcast_to(arr, (dim,)).astype(float).copy()
