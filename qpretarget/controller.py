@@ -209,6 +209,14 @@ class Controller:
         self.v = np.zeros(self.robot.nv)
         self.fallback = None  # set by modules that provide a relaxation (see constraints)
         self._init_fallback()
+        # Acceleration level (CRAC eq. 30-42) lives in its own module and takes over step().
+        self._level_impl: Any = None
+        if self.level == "acceleration":
+            from .acceleration import AccelerationLevel
+
+            self._level_impl = AccelerationLevel(self, self.config.get("acceleration"))
+        elif self.config.get("acceleration") is not None:
+            raise ConfigError("an `acceleration:` section needs `level: acceleration`.", path="acceleration")
         self.reset()
 
     def _init_fallback(self) -> None:
@@ -271,6 +279,8 @@ class Controller:
             con.reset(self.state)
         self.regularization.reset(self.state)
         self.strategy.reset()
+        if self._level_impl is not None:
+            self._level_impl.reset()
         out = q.copy()
         out.setflags(write=False)
         return out
@@ -393,6 +403,8 @@ class Controller:
             TargetError: on an unknown task name or a target of the wrong shape/type (a
                 programming error). NaN values are not errors: they are missing data.
         """
+        if self._level_impl is not None:
+            return self._level_impl.step(targets, dt=dt)
         t0 = time.perf_counter()
         if dt is None:
             dt = self.dt
