@@ -29,7 +29,7 @@ import yaml
 from .constraints import CONSTRAINTS, Constraint
 from .errors import ConfigError, TargetError, close_matches_hint
 from .registry import build_from_spec
-from .robot import RobotModel, RobotState, load_robot
+from .robot import ERD_PREFIX, RobotModel, RobotState, load_robot
 from .solvers import make_solver
 from .strategies import STRATEGIES, Strategy, TickProblem
 from .tasks import TASKS, Task
@@ -129,8 +129,9 @@ class Controller:
         if isinstance(robot_spec, Mapping):
             robot_spec = dict(robot_spec)
             for k in ("urdf", "srdf"):
-                if k in robot_spec and robot_spec[k] is not None:
-                    robot_spec[k] = str((self.base_dir / str(robot_spec[k])).resolve())
+                value = robot_spec.get(k)
+                if value is not None and not str(value).startswith(ERD_PREFIX):
+                    robot_spec[k] = str((self.base_dir / str(value)).resolve())
         self.robot: RobotModel = load_robot(robot_spec, path="robot")
         dt = cfg.get("dt", 0.01)
         if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0 < dt < 1:

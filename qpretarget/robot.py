@@ -21,6 +21,17 @@ from .errors import ConfigError, UnknownFrameError, UnknownJointError
 from .robots import FootDescription, RobotDescription, get_description, robots_directory, share_directory
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+#: Prefix of a path inside example-robot-data's robots directory, e.g.
+#: ``example-robot-data:panda_description/urdf/panda.urdf``.
+ERD_PREFIX = "example-robot-data:"
+
+
+def resolve_robot_path(path: str | Path) -> Path:
+    """Resolve ``example-robot-data:REL`` against the installed package; other paths unchanged."""
+    s = str(path)
+    if s.startswith(ERD_PREFIX):
+        return robots_directory() / s[len(ERD_PREFIX) :]
+    return Path(s)
 
 
 class RobotModel:
@@ -59,11 +70,11 @@ class RobotModel:
         velocity_limits: Mapping[str, float] | None = None,
         place_on_ground: bool = True,
     ) -> None:
-        urdf = Path(urdf)
+        urdf = resolve_robot_path(urdf)
         if not urdf.is_file():
             raise ConfigError(f"URDF file {str(urdf)!r} does not exist.", path="robot.urdf")
         self.urdf_path = urdf
-        self.srdf_path = Path(srdf) if srdf is not None else None
+        self.srdf_path = resolve_robot_path(srdf) if srdf is not None else None
         if self.srdf_path is not None and not self.srdf_path.is_file():
             raise ConfigError(f"SRDF file {str(srdf)!r} does not exist.", path="robot.srdf")
         self.name = name or urdf.stem
@@ -331,8 +342,6 @@ def load_robot(spec: str | Mapping[str, Any] | RobotModel, *, path: str = "robot
                 ) from None
         spec["feet"] = parsed
     if "urdf" in spec:
-        if "name" in spec and spec.get("name") in ():
-            pass
         return RobotModel(**spec)
     name = spec.pop("name", None)
     if name is None:
