@@ -112,7 +112,9 @@ class Controller:
 
     def __init__(self, config: Mapping[str, Any], *, base_dir: str | Path | None = None) -> None:
         if not isinstance(config, Mapping):
-            raise ConfigError(f"a controller config must be a mapping, got {type(config).__name__}.")
+            raise ConfigError(
+                f"a controller config must be a mapping, got {type(config).__name__}."
+            )
         self.config = copy.deepcopy(dict(config))
         self.base_dir = Path(base_dir) if base_dir is not None else Path.cwd()
         cfg = self.config
@@ -124,7 +126,9 @@ class Controller:
                     path=key,
                 )
         if "robot" not in cfg:
-            raise ConfigError("missing `robot:` (a bundled name such as g1, or {urdf: PATH}).", path="robot")
+            raise ConfigError(
+                "missing `robot:` (a bundled name such as g1, or {urdf: PATH}).", path="robot"
+            )
         robot_spec = cfg["robot"]
         if isinstance(robot_spec, Mapping):
             robot_spec = dict(robot_spec)
@@ -152,10 +156,15 @@ class Controller:
             path = f"tasks[{i}]"
             type_name, kwargs = _section(spec, path)
             cls = TASKS.lookup(type_name, path=f"{path}.type")
-            kwargs.setdefault("name", kwargs.get("frame", type_name) if type_name != "frame" else kwargs.get("name"))
+            kwargs.setdefault(
+                "name",
+                kwargs.get("frame", type_name) if type_name != "frame" else kwargs.get("name"),
+            )
             task = build_from_spec(cls, kwargs, path=path)
             if task.name in self.tasks:
-                raise ConfigError(f"two tasks are named {task.name!r}; names must be unique.", path=f"{path}.name")
+                raise ConfigError(
+                    f"two tasks are named {task.name!r}; names must be unique.", path=f"{path}.name"
+                )
             task.bind(self.robot, path=path)
             task.yaml_path = path  # type: ignore[attr-defined]
             self.tasks[task.name] = task
@@ -165,7 +174,9 @@ class Controller:
         # Constraints.
         cons_spec = cfg.get("constraints") or []
         if not isinstance(cons_spec, Sequence) or isinstance(cons_spec, str):
-            raise ConfigError("constraints must be a list of mappings with a `type:`.", path="constraints")
+            raise ConfigError(
+                "constraints must be a list of mappings with a `type:`.", path="constraints"
+            )
         self.constraints: list[Constraint] = []
         for i, spec in enumerate(cons_spec):
             path = f"constraints[{i}]"
@@ -175,7 +186,9 @@ class Controller:
             con.bind(self.robot, path=path)
             con.yaml_path = path  # type: ignore[attr-defined]
             if any(c.name == con.name for c in self.constraints):
-                raise ConfigError(f"two constraints are named {con.name!r}; give one a `name:`.", path=path)
+                raise ConfigError(
+                    f"two constraints are named {con.name!r}; give one a `name:`.", path=path
+                )
             self.constraints.append(con)
         self._row_constraints = [c for c in self.constraints if c.n_rows > 0]
         self.n_rows = sum(c.n_rows for c in self._row_constraints)
@@ -185,14 +198,18 @@ class Controller:
         # Regularization, solver, strategy.
         rtype, rkwargs = _section(cfg.get("regularization"), "regularization", "identity")
         self.regularization: Regularization = build_from_spec(
-            REGULARIZATIONS.lookup(rtype, path="regularization.type"), rkwargs, path="regularization"
+            REGULARIZATIONS.lookup(rtype, path="regularization.type"),
+            rkwargs,
+            path="regularization",
         )
         self.regularization.bind(self.robot, self)
         solver_spec = cfg.get("solver", {"name": "proxsuite"})
         make_solver(solver_spec, path="solver")  # validate now, not at the first tick
         self.solver_spec = solver_spec
         stype, skwargs = _section(cfg.get("strategy"), "strategy", "augmentation")
-        self.strategy: Strategy = build_from_spec(STRATEGIES.lookup(stype, path="strategy.type"), skwargs, path="strategy")
+        self.strategy: Strategy = build_from_spec(
+            STRATEGIES.lookup(stype, path="strategy.type"), skwargs, path="strategy"
+        )
         self.strategy.bind(
             self.robot,
             [(t.name, t.dim, t.level) for t in self.tasks.values()],
@@ -217,7 +234,9 @@ class Controller:
 
             self._level_impl = AccelerationLevel(self, self.config.get("acceleration"))
         elif self.config.get("acceleration") is not None:
-            raise ConfigError("an `acceleration:` section needs `level: acceleration`.", path="acceleration")
+            raise ConfigError(
+                "an `acceleration:` section needs `level: acceleration`.", path="acceleration"
+            )
         self.reset()
 
     def _init_fallback(self) -> None:
@@ -245,7 +264,9 @@ class Controller:
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
             where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-            raise ConfigError(f"{path}: invalid YAML{where}: {getattr(exc, 'problem', exc)}") from None
+            raise ConfigError(
+                f"{path}: invalid YAML{where}: {getattr(exc, 'problem', exc)}"
+            ) from None
         if not isinstance(cfg, Mapping):
             raise ConfigError(f"{path}: the file must hold a mapping (robot:, tasks:, ...).")
         try:
@@ -269,7 +290,11 @@ class Controller:
         Returns:
             The configuration (read-only copy).
         """
-        q = self.robot.q_reference.copy() if q is None else self.robot.check_configuration(q, what="reset q")
+        q = (
+            self.robot.q_reference.copy()
+            if q is None
+            else self.robot.check_configuration(q, what="reset q")
+        )
         self.v = np.zeros(self.robot.nv)
         self.state.update(q, self.v)
         self.tick = 0
@@ -312,7 +337,9 @@ class Controller:
             if c.type_name == name:
                 return c
         known = [c.name for c in self.constraints]
-        raise KeyError(f"no constraint {name!r}.{close_matches_hint(name, known)} Constraints: {known}")
+        raise KeyError(
+            f"no constraint {name!r}.{close_matches_hint(name, known)} Constraints: {known}"
+        )
 
     def set_contacts(self, feet: Sequence[str]) -> None:
         """Switch the supporting feet (delegated to the ``contacts`` constraint module)."""
@@ -323,14 +350,19 @@ class Controller:
                     if other is not c and hasattr(other, "on_contacts_changed"):
                         other.on_contacts_changed(c, self.state)
                 return
-        raise ConfigError("set_contacts needs a `contacts` constraint in the config.", path="constraints")
+        raise ConfigError(
+            "set_contacts needs a `contacts` constraint in the config.", path="constraints"
+        )
 
     def set_targets(self, targets: Mapping[str, Any] | None, messages: list[str]) -> None:
         """Hand each target to its task; NaN targets become missing data (reported)."""
         if not targets:
             return
         if not isinstance(targets, Mapping):
-            raise TargetError(f"targets must be a mapping task name -> target, got {type(targets).__name__}.", tick=self.tick)
+            raise TargetError(
+                f"targets must be a mapping task name -> target, got {type(targets).__name__}.",
+                tick=self.tick,
+            )
         for name, target in targets.items():
             if name not in self.tasks:
                 raise TargetError(
@@ -344,7 +376,8 @@ class Controller:
             if not task.set_target(target, tick=self.tick):
                 task.mark_missing()
                 messages.append(
-                    f"task {name!r}, tick {self.tick}: target contains NaN or inf; keeping the last "
+                    f"task {name!r}, tick {self.tick}: target contains NaN or inf; keeping the "
+                    "last "
                     f"target with weight 0 this tick (recovers over {task.recovery_time} s)."
                 )
 
@@ -387,9 +420,23 @@ class Controller:
                 self._u[i : i + k] = blk.u
             i += k
         W = self.regularization.matrix(state, dt)
-        return TickProblem(state, dt, blocks, self._C, self._l, self._u, lb, ub, W, self.regularization.damping, self.tick)
+        return TickProblem(
+            state,
+            dt,
+            blocks,
+            self._C,
+            self._l,
+            self._u,
+            lb,
+            ub,
+            W,
+            self.regularization.damping,
+            self.tick,
+        )
 
-    def step(self, targets: Mapping[str, Any] | None = None, *, dt: float | None = None) -> StepResult:
+    def step(
+        self, targets: Mapping[str, Any] | None = None, *, dt: float | None = None
+    ) -> StepResult:
         """Run one control tick.
 
         Args:
@@ -410,7 +457,9 @@ class Controller:
         if dt is None:
             dt = self.dt
         elif isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0 < dt < 1:
-            raise TargetError(f"dt must be a number of seconds in (0, 1), got {dt!r}.", tick=self.tick + 1)
+            raise TargetError(
+                f"dt must be a number of seconds in (0, 1), got {dt!r}.", tick=self.tick + 1
+            )
         self.tick += 1
         messages: list[str] = []
         self.set_targets(targets, messages)
@@ -429,16 +478,23 @@ class Controller:
                 v = fb.x
                 relaxed.update(fb.relaxed)
                 status = "relaxed"
-                messages.append(f"tick {self.tick}: hard constraints conflicted ({res.status}); relaxed {fb.relaxed}.")
+                messages.append(
+                    f"tick {self.tick}: hard constraints conflicted ({res.status}); "
+                    f"relaxed {fb.relaxed}."
+                )
         if relaxed and status == "ok":
             status = "relaxed"
         if v is None or not np.all(np.isfinite(v)):
             messages.append(
-                f"tick {self.tick}: no usable QP solution (solver status {res.status}); holding the "
+                f"tick {self.tick}: no usable QP solution (solver status {res.status}); "
+                "holding the "
                 f"configuration (v = 0)."
             )
             v = np.zeros(self.robot.nv)
             status = "held"
+        else:
+            # Solvers meet bounds to their tolerance; the box is cheap to meet exactly.
+            np.clip(v, tp.lb, tp.ub, out=v)
         state = self.state
         errors = {b.task: self.tasks[b.task].error_norm(b.error) for b in tp.blocks}
         q_next = self.robot.integrate(state.q, v, dt)

@@ -53,8 +53,14 @@ class QPProblem:
         viol = 0.0
         if self.n_in:
             Cx = self.C @ x
-            viol = max(viol, float(np.max(self.l - Cx, initial=0.0)), float(np.max(Cx - self.u, initial=0.0)))
-        viol = max(viol, float(np.max(self.lb - x, initial=0.0)), float(np.max(x - self.ub, initial=0.0)))
+            viol = max(
+                viol,
+                float(np.max(self.l - Cx, initial=0.0)),
+                float(np.max(Cx - self.u, initial=0.0)),
+            )
+        viol = max(
+            viol, float(np.max(self.lb - x, initial=0.0)), float(np.max(x - self.ub, initial=0.0))
+        )
         return viol
 
     def is_finite(self) -> bool:
@@ -83,8 +89,7 @@ class QPProblem:
         h = np.concatenate([u[up], -l[lo]]) if G is not None else None
         A = C[eq] if eq.any() else None
         b = u[eq] if eq.any() else None
-        lb = np.where(np.isfinite(self.lb), self.lb, -INF)
-        ub = np.where(np.isfinite(self.ub), self.ub, INF)
+        lb, ub = self.lb.copy(), self.ub.copy()  # infinite entries stay inf (qpsolvers maps them)
         has_box = np.isfinite(self.lb).any() or np.isfinite(self.ub).any()
         return {
             "P": self.H,

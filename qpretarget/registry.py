@@ -53,7 +53,9 @@ class Registry(dict[str, type]):
             ) from None
 
 
-def check_keywords(cls: type, spec: Mapping[str, Any], *, path: str, extra: tuple[str, ...] = ()) -> None:
+def check_keywords(
+    cls: type, spec: Mapping[str, Any], *, path: str, extra: tuple[str, ...] = ()
+) -> None:
     """Check that ``spec``'s keys are keyword arguments of ``cls`` and required ones are present."""
     sig = inspect.signature(cls.__init__)
     params = {

@@ -18,7 +18,13 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import ConfigError, UnknownFrameError, UnknownJointError
-from .robots import FootDescription, RobotDescription, get_description, robots_directory, share_directory
+from .robots import (
+    FootDescription,
+    RobotDescription,
+    get_description,
+    robots_directory,
+    share_directory,
+)
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: Prefix of a path inside example-robot-data's robots directory, e.g.
@@ -158,6 +164,15 @@ class RobotModel:
             q_ref[self.joint_q_index[j]] = float(value)
         if free_flyer:
             q_ref[3:7] = q_ref[3:7] / np.linalg.norm(q_ref[3:7])
+        # A reference outside the joint limits is unusable by a controller: move such joints just
+        # inside (by 1% of their range, at most 0.01 rad) and keep the list for `info`.
+        qi = self.joint_q_index
+        lo, hi = self.q_min[qi], self.q_max[qi]
+        inset = np.minimum(0.01, 0.01 * (hi - lo))
+        clipped = np.clip(q_ref[qi], lo + inset, hi - inset)
+        outside = (q_ref[qi] < lo) | (q_ref[qi] > hi)
+        self.reference_adjusted = [self.joint_names[j] for j in np.where(outside)[0]]
+        q_ref[qi] = np.where(outside, clipped, q_ref[qi])
         self.data = model.createData()
         if free_flyer and place_on_ground and self.feet:
             q_ref = self._place_on_ground(q_ref)
@@ -266,7 +281,9 @@ class RobotModel:
                 f"got {arr.shape}."
             )
         if not np.all(np.isfinite(arr)):
-            raise ConfigError(f"{what} contains NaN or inf at indices {np.where(~np.isfinite(arr))[0]}.")
+            raise ConfigError(
+                f"{what} contains NaN or inf at indices {np.where(~np.isfinite(arr))[0]}."
+            )
         if self.free_flyer:
             arr = arr.copy()
             n = np.linalg.norm(arr[3:7])
@@ -279,7 +296,10 @@ class RobotModel:
         """Collision geometry of the URDF (raw meshes), loaded once on demand."""
         if "collision" not in self._geometry_cache:
             gmodel = pin.buildGeomFromUrdf(
-                self.model, str(self.urdf_path), pin.GeometryType.COLLISION, [str(share_directory())]
+                self.model,
+                str(self.urdf_path),
+                pin.GeometryType.COLLISION,
+                [str(share_directory())],
             )
             self._geometry_cache["collision"] = (gmodel, gmodel.createData())
         return self._geometry_cache["collision"]
@@ -303,7 +323,9 @@ def load_robot(spec: str | Mapping[str, Any] | RobotModel, *, path: str = "robot
     if isinstance(spec, str):
         return RobotModel.from_name(spec)
     if not isinstance(spec, Mapping):
-        raise ConfigError(f"expected a robot name or a mapping, got {type(spec).__name__}.", path=path)
+        raise ConfigError(
+            f"expected a robot name or a mapping, got {type(spec).__name__}.", path=path
+        )
     spec = dict(spec)
     allowed = {
         "name", "urdf", "srdf", "free_flyer", "reference", "reference_joints", "feet",
@@ -321,7 +343,10 @@ def load_robot(spec: str | Mapping[str, Any] | RobotModel, *, path: str = "robot
     feet = spec.pop("feet", None)
     if feet is not None:
         if not isinstance(feet, Mapping):
-            raise ConfigError("feet must map a foot name to {frame, parent, offset, rectangle}.", path=f"{path}.feet")
+            raise ConfigError(
+                "feet must map a foot name to {frame, parent, offset, rectangle}.",
+                path=f"{path}.feet",
+            )
         parsed = {}
         for fname, f in feet.items():
             if isinstance(f, FootDescription):
@@ -332,7 +357,9 @@ def load_robot(spec: str | Mapping[str, Any] | RobotModel, *, path: str = "robot
                     frame=f["frame"],
                     parent=f.get("parent"),
                     offset=tuple(float(x) for x in f.get("offset", (0, 0, 0))),
-                    rectangle=tuple(float(x) for x in f.get("rectangle", (-0.05, 0.1, -0.03, 0.03))),
+                    rectangle=tuple(
+                        float(x) for x in f.get("rectangle", (-0.05, 0.1, -0.03, 0.03))
+                    ),
                 )
             except (KeyError, TypeError) as exc:
                 raise ConfigError(

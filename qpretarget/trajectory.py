@@ -94,9 +94,15 @@ class RobotTrajectory:
             "config_yaml": np.array(self.config_yaml),
             "task_names": np.array(self.task_names, dtype=str),
             "foot_names": np.array(self.foot_names, dtype=str),
-            "contacts": np.zeros((T, 0), bool) if self.contacts is None else np.asarray(self.contacts, bool),
-            "status": np.array(["ok"] * T) if self.status is None else np.asarray(self.status, dtype=str),
-            "solve_time": np.zeros(T) if self.solve_time is None else np.asarray(self.solve_time, float),
+            "contacts": np.zeros((T, 0), bool)
+            if self.contacts is None
+            else np.asarray(self.contacts, bool),
+            "status": np.array(["ok"] * T)
+            if self.status is None
+            else np.asarray(self.status, dtype=str),
+            "solve_time": np.zeros(T)
+            if self.solve_time is None
+            else np.asarray(self.solve_time, float),
             "meta": np.array(json.dumps(self.meta, default=str)),
         }
         for k, a in self.targets.items():

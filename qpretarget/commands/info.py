@@ -17,6 +17,7 @@ HELP = """examples:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``info`` subcommand."""
     p = sub.add_parser(
         "info",
         help="robot, DoF, frames, limits, tasks and constraints of a config",
@@ -38,7 +39,7 @@ def describe_robot(robot, *, frames: bool, limits: bool) -> list[str]:  # noqa: 
         f"dimensions   nq={robot.nq} nv={robot.nv}  free-flyer={robot.free_flyer}  "
         f"joints={len(robot.joint_names)}",
         f"SRDF         {robot.srdf_path.name if robot.srdf_path else '-'}",
-        f"feet         "
+        "feet         "
         + ", ".join(f"{k}: {f.frame} {list(f.rectangle)}" for k, f in robot.feet.items()),
         "key-points   " + ", ".join(f"{k}->{v}" for k, v in robot.keyframes.items()),
     ]
@@ -57,6 +58,7 @@ def describe_robot(robot, *, frames: bool, limits: bool) -> list[str]:  # noqa: 
 
 
 def run(args: argparse.Namespace) -> int:
+    """Print the description; return the exit code."""
     from ..robots import ROBOTS
 
     if args.robots or args.target is None:

@@ -40,7 +40,7 @@ class ConstraintBlock:
     u: np.ndarray
 
 
-class Constraint(abc.ABC):
+class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses pick theirs
     """A hard-constraint module.
 
     Args:

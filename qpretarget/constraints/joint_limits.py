@@ -19,10 +19,10 @@ from .base import CONSTRAINTS, Constraint
 
 @CONSTRAINTS.register("joint_limits")
 class JointLimits(Constraint):
-    """Keep every limited joint inside ``[q_min, q_max]`` of the URDF (or the YAML override).
+    r"""Keep every limited joint inside ``[q_min, q_max]`` of the URDF (or the YAML override).
 
     Args:
-        gain: :math:`\\gamma`, fraction of the distance to the limit allowed per tick (0, 1].
+        gain: :math:`\gamma`, fraction of the distance to the limit allowed per tick (0, 1].
         margin: keep this far inside the limits [rad].
         name: constraint name.
     """

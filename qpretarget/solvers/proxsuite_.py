@@ -52,7 +52,12 @@ class ProxSuiteSolver(QPSolver):
         self._shape = None
 
     def settings_summary(self) -> dict[str, Any]:
-        return {"eps_abs": self.eps_abs, "eps_rel": self.eps_rel, "max_iter": self.max_iter, "warm_start": self.warm_start}
+        return {
+            "eps_abs": self.eps_abs,
+            "eps_rel": self.eps_rel,
+            "max_iter": self.max_iter,
+            "warm_start": self.warm_start,
+        }
 
     def _fill(self, problem: QPProblem) -> None:
         """Stack the rows and the box as ``[C; I]`` (ProxSuite 0.8's box mode is less accurate)."""
@@ -74,7 +79,12 @@ class ProxSuiteSolver(QPSolver):
             self._fill(problem)
             qp = proxqp.dense.QP(n, 0, m + n, False)
             s = qp.settings
-            s.eps_abs, s.eps_rel, s.max_iter, s.verbose = self.eps_abs, self.eps_rel, self.max_iter, self.verbose
+            s.eps_abs, s.eps_rel, s.max_iter, s.verbose = (
+                self.eps_abs,
+                self.eps_rel,
+                self.max_iter,
+                self.verbose,
+            )
             qp.init(problem.H, problem.g, None, None, self._C, self._l, self._u)
             self._fresh = True
             self._keep = self._qp  # keep the old workspace alive until the new one exists

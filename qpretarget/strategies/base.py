@@ -74,7 +74,13 @@ class Strategy(abc.ABC):
 
     type_name: ClassVar[str] = "strategy"
 
-    def bind(self, robot: RobotModel, task_dims: list[tuple[str, int, int]], n_rows: int, solver_factory: Any) -> None:
+    def bind(
+        self,
+        robot: RobotModel,
+        task_dims: list[tuple[str, int, int]],
+        n_rows: int,
+        solver_factory: Any,
+    ) -> None:
         """Preallocate for tasks ``(name, dim, level)``, ``n_rows`` constraint rows.
 
         ``solver_factory()`` returns a new :class:`QPSolver` (one per QP that needs its own warm

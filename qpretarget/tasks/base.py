@@ -49,8 +49,10 @@ class CostBlock:
 
 
 class Task(abc.ABC):
-    """A cost module. Subclasses implement :meth:`bind`, :meth:`compute_error`,
-    :meth:`compute_jacobian` and :meth:`set_target`; the base class builds the QP block.
+    r"""A cost module; the base class builds its QP block.
+
+    Subclasses implement :meth:`bind`, :meth:`compute_error`, :meth:`compute_jacobian` and
+    :meth:`set_target`.
 
     Args:
         name: task name, the key of its target in :meth:`Controller.step`.
@@ -95,7 +97,9 @@ class Task(abc.ABC):
     def bind(self, robot: RobotModel, *, path: str = "") -> None:
         """Resolve names to ids and fix the task dimension; raise here on bad names."""
         self.robot = robot
-        self.weight = weight_vector(self._weight_spec, self.dim, f"{path}.weight" if path else "weight")
+        self.weight = weight_vector(
+            self._weight_spec, self.dim, f"{path}.weight" if path else "weight"
+        )
 
     def reset(self, state: RobotState) -> None:
         """Set the target to the current value (zero error) and forget history."""
@@ -154,7 +158,9 @@ class Task(abc.ABC):
         )
 
 
-def as_finite_array(value: Any, shape: tuple[int, ...], *, task: str, tick: int | None, what: str) -> np.ndarray | None:
+def as_finite_array(
+    value: Any, shape: tuple[int, ...], *, task: str, tick: int | None, what: str
+) -> np.ndarray | None:
     """Return ``value`` as a float array of ``shape``; ``None`` if it holds NaN (missing data).
 
     Raises:

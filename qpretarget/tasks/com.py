@@ -40,8 +40,15 @@ class ComTask(Task):
             name, weight=weight, gain=gain, level=level, feedforward=feedforward,
             recovery_time=recovery_time,
         )  # fmt: skip
-        if not isinstance(axes, str) or not axes or any(a not in _AXES for a in axes) or len(set(axes)) != len(axes):
-            raise ConfigError(f"axes must be a string of distinct letters among x, y, z, got {axes!r}.")
+        if (
+            not isinstance(axes, str)
+            or not axes
+            or any(a not in _AXES for a in axes)
+            or len(set(axes)) != len(axes)
+        ):
+            raise ConfigError(
+                f"axes must be a string of distinct letters among x, y, z, got {axes!r}."
+            )
         self.axes = axes
         self.rows = np.array([_AXES[a] for a in axes], dtype=int)
         self.dim = len(self.rows)
@@ -59,7 +66,11 @@ class ComTask(Task):
         try:
             arr = np.array(target, dtype=float)
         except (TypeError, ValueError):
-            raise TargetError(f"CoM target must be numbers, got {type(target).__name__}.", task=self.name, tick=tick) from None
+            raise TargetError(
+                f"CoM target must be numbers, got {type(target).__name__}.",
+                task=self.name,
+                tick=tick,
+            ) from None
         if arr.shape == (3,):
             full = arr
         elif arr.shape == (self.dim,):
@@ -67,7 +78,8 @@ class ComTask(Task):
             full[self.rows] = arr
         else:
             raise TargetError(
-                f"CoM target must have shape (3,) or ({self.dim},) for axes {self.axes!r}, got {arr.shape}.",
+                f"CoM target must have shape (3,) or ({self.dim},) for axes {self.axes!r}, "
+                f"got {arr.shape}.",
                 task=self.name,
                 tick=tick,
             )
@@ -83,4 +95,7 @@ class ComTask(Task):
         return state.com_jacobian()[self.rows]
 
     def __repr__(self) -> str:
-        return f"ComTask(axes={self.axes!r}, name={self.name!r}, weight={self._weight_spec!r}, gain={self.gain!r}, level={self.level})"
+        return (
+            f"ComTask(axes={self.axes!r}, name={self.name!r}, weight={self._weight_spec!r}, "
+            f"gain={self.gain!r}, level={self.level})"
+        )

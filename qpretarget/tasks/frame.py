@@ -85,7 +85,9 @@ class FrameTask(Task):
         self.position_weight = weight_vector(position_weight, 3, "position_weight")
         self.orientation_weight = weight_vector(orientation_weight, 3, "orientation_weight")
         self.offset = None if offset is None else np.asarray(offset, dtype=float)
-        if self.offset is not None and (self.offset.shape != (3,) or not np.all(np.isfinite(self.offset))):
+        if self.offset is not None and (
+            self.offset.shape != (3,) or not np.all(np.isfinite(self.offset))
+        ):
             raise ConfigError(f"offset must be 3 finite numbers [m], got {offset!r}.")
         self.frame_id = -1
         self.position_target = np.zeros(3)
@@ -197,7 +199,9 @@ class FrameTask(Task):
             return self.position_target - p
         if self.mode == "orientation":
             return orientation_error(R, self.rotation_target)
-        return np.concatenate([self.position_target - p, orientation_error(R, self.rotation_target)])
+        return np.concatenate(
+            [self.position_target - p, orientation_error(R, self.rotation_target)]
+        )
 
     def compute_jacobian(self, state: RobotState) -> np.ndarray:
         J6 = state.frame_jacobian(self.frame_id)
@@ -212,13 +216,20 @@ class FrameTask(Task):
         return np.vstack([Jp, J6[3:]])
 
     def compute_jdot_v(self, state: RobotState) -> np.ndarray:
-        r"""Classical acceleration :math:`\dot J v` of the frame (needs ``forwardKinematics`` with v, a=0)."""
-        a = pin.getFrameClassicalAcceleration(state.model, state.data, self.frame_id, pin.LOCAL_WORLD_ALIGNED)
+        r"""Classical acceleration :math:`\dot J v` of the frame.
+
+        Needs ``forwardKinematics(model, data, q, v, 0)`` first.
+        """
+        a = pin.getFrameClassicalAcceleration(
+            state.model, state.data, self.frame_id, pin.LOCAL_WORLD_ALIGNED
+        )
         parts = []
         if self.has_position:
             lin = a.linear
             if self.offset is not None:
-                w = pin.getFrameVelocity(state.model, state.data, self.frame_id, pin.LOCAL_WORLD_ALIGNED).angular
+                w = pin.getFrameVelocity(
+                    state.model, state.data, self.frame_id, pin.LOCAL_WORLD_ALIGNED
+                ).angular
                 r = state.frame_placement(self.frame_id).rotation @ self.offset
                 lin = lin + np.cross(a.angular, r) + np.cross(w, np.cross(w, r))
             parts.append(lin)

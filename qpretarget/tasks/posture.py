@@ -81,7 +81,9 @@ class PostureTask(Task):
             try:
                 arr = np.array(target, dtype=float)
             except (TypeError, ValueError):
-                raise TargetError("posture target must be numbers or {joint: value}.", task=self.name, tick=tick) from None
+                raise TargetError(
+                    "posture target must be numbers or {joint: value}.", task=self.name, tick=tick
+                ) from None
             if arr.shape == (robot.nq,):
                 q = arr
             elif arr.shape == (len(robot.joint_names),):
@@ -107,7 +109,7 @@ class PostureTask(Task):
 
 @TASKS.register("damping")
 class DampingTask(Task):
-    r"""Velocity damping: :math:`J = I`, :math:`v^* = 0` (Tikhonov regularization :math:`w |v|^2`)."""
+    r"""Velocity damping: :math:`J = I`, :math:`v^* = 0` (Tikhonov term :math:`w |v|^2`)."""
 
     def __init__(self, name: str = "damping", *, weight: Any = 1e-3, level: int = 1) -> None:
         super().__init__(name, weight=weight, level=level)

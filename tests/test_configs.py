@@ -1,0 +1,37 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Every shipped config builds and runs a few ticks, and the CLI describes it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from qpretarget import Controller
+from qpretarget.cli import main
+
+CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=[p.stem for p in CONFIGS])
+def test_config_runs(path: Path) -> None:
+    ctrl = Controller.from_yaml(path)
+    q0 = ctrl.reset()
+    for _ in range(5):
+        res = ctrl.step({})
+    assert res.status == "ok", res.messages
+    assert np.all(np.isfinite(res.q))
+    # no targets given: the robot holds its pose (tasks start with zero error)
+    assert np.linalg.norm(ctrl.robot.difference(q0, res.q)) < 1e-6
+
+
+def test_info_command(capsys) -> None:
+    assert main(["info", str(CONFIGS[0].parent / "g1_augmentation.yaml"), "--limits"]) == 0
+    out = capsys.readouterr().out
+    assert "nq=36 nv=35" in out and "left_knee_joint" in out and "tasks (8)" in out
+
+
+def test_info_bad_target_exit_code(capsys) -> None:
+    assert main(["info", "g2"]) == 2
+    assert "neither a config file nor a bundled robot" in capsys.readouterr().err
