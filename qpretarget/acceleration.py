@@ -1,0 +1,426 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Constrained resolved acceleration control, CRAC (Bin Hammam et al. 2015, eq. 9-11, 30-42).
+
+``level: acceleration`` in a controller's YAML hands :meth:`Controller.step` to
+:class:`AccelerationLevel`. It reuses the controller's task and constraint modules, its
+regularization metric :math:`W` and its strategy (augmentation, hierarchy, ...): one tick is
+
+1. **Velocity-level reference** :math:`\dot q_c` (CRAC eq. 16 / 41): the controller's own
+   velocity-level problem for the same targets, solved by a second instance of its strategy, with
+   every hard constraint (foot contacts as equality rows, hence first priority as in eq. 41).
+2. **Resolved acceleration** :math:`\alpha` (CRAC eq. 9-11, 13-14, 32) as a QP. Every task block
+   keeps its Jacobian and weight; its reference becomes
+
+   .. math::
+       J_i \alpha \approx a^*_i - \dot J_i \dot q, \qquad
+       a^*_i = a_{d,i} + K_v (v_{d,i} - J_i \dot q) + K_p e_i \quad \text{(CRAC eq. 11)},
+
+   and the same strategy solves it, so augmentation, hierarchy and any regularization work at
+   acceleration level. Hard constraints are transcribed from the velocity level: a velocity-level
+   row :math:`l \le C v \le u` (or box bound) must hold for the velocity reached at the end of the
+   tick, :math:`v^+ = \dot q + \alpha_c\,dt`, i.e.
+
+   .. math::
+       \frac{l - C \dot q}{dt} - C s \le C \alpha \le \frac{u - C \dot q}{dt} - C s,
+       \qquad s = G_v (\dot q_c - \dot q).
+
+   With the semi-implicit integration below, :math:`q^+ = q \oplus v^+ dt`, the joint-limit bound
+   :math:`\gamma (q_{min} - q)/dt \le v^+ \le \gamma (q_{max} - q)/dt` keeps :math:`q^+` inside
+   its limits and the velocity bound keeps :math:`|v^+| \le v_{max}`: the limits hold over the
+   tick, for the acceleration actually applied. Equality rows (foot contacts,
+   :math:`J_f v = -k\,e_f` with drift correction) stay equalities on :math:`\alpha`, hence the
+   first priority of CRAC eq. 34-42.
+3. **Constrained resolved acceleration** (CRAC eq. 31)
+   :math:`\alpha_c = \alpha + G_v (\dot q_c - \dot q)`, torques by RNEA (CRAC eq. 30)
+   :math:`\tau = H \alpha_c + C(q, \dot q)\dot q + \tau_g`, and the state is integrated
+   semi-implicitly (symplectic Euler): :math:`\dot q^+ = \dot q + \alpha_c dt`,
+   :math:`q^+ = q \oplus \dot q^+ dt` (pinocchio ``integrate``).
+
+Without active constraints, for a task with :math:`J J^\dagger = I`, the task error obeys CRAC
+eq. 33, :math:`\ddot e + K_v \dot e + K_p e = -J G_v (\dot q_c - \dot q)`; with
+:math:`J \dot q_c = v_d + K e` (the velocity-level gain :math:`K`) the right side is
+:math:`-G_v (K e + \dot e)` and the closed loop is
+:math:`\ddot e + (K_v + G_v)\dot e + (K_p + G_v K) e = 0`; with :math:`G_v = 0` it is the
+critically damped :math:`\ddot e + K_v \dot e + K_p e = 0` of the paper's gains.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import ConfigError, TargetError
+from .registry import build_from_spec
+from .robot import RobotState
+from .solvers import make_solver
+from .strategies import STRATEGIES, Strategy, StrategyResult, TickProblem
+from .tasks import CostBlock, Task
+from .tasks.com import ComTask
+from .tasks.posture import DampingTask, PostureTask
+from .validation import positive_float
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .controller import Controller, StepResult
+
+#: Damping :math:`\lambda` of CRAC section 5, used when the YAML's ``regularization`` gives none.
+PAPER_DAMPING = 0.1
+
+
+@dataclass(frozen=True, slots=True)
+class AccelerationGains:
+    r"""The YAML ``acceleration:`` section (CRAC section 5 defaults).
+
+    Args:
+        kp: position gain :math:`K_p` [1/s^2] of CRAC eq. 11.
+        kv: velocity gain :math:`K_v` [1/s]; ``None`` gives the critically damped
+            :math:`2\sqrt{K_p}`.
+        gv: joint velocity gain :math:`G_v` [1/s] of CRAC eq. 31 pulling :math:`\dot q` towards
+            the velocity-level solution :math:`\dot q_c`; 0 turns the pull off.
+        velocity_gain: task gain :math:`K` [1/s] of the velocity-level reference
+            :math:`v^* = v_d + K e` (CRAC eq. 15) used for :math:`\dot q_c`; ``None`` uses each
+            task's own ``gain`` (the velocity-level controller's reference, capped at ``1/dt``).
+    """
+
+    kp: float = 300.0
+    kv: float | None = None
+    gv: float = 30.0
+    velocity_gain: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kp", positive_float(self.kp, "kp [1/s^2]"))
+        kv = 2.0 * math.sqrt(self.kp) if self.kv is None else positive_float(self.kv, "kv [1/s]")
+        object.__setattr__(self, "kv", kv)
+        object.__setattr__(self, "gv", positive_float(self.gv, "gv [1/s]", allow_zero=True))
+        if self.velocity_gain is not None:
+            vg = positive_float(self.velocity_gain, "velocity_gain [1/s]")
+            object.__setattr__(self, "velocity_gain", vg)
+
+
+def _rebuild_strategy(controller: Controller) -> Strategy:
+    """A second, independent instance of the controller's strategy (own solvers, own warm start)."""
+    spec = controller.config.get("strategy")
+    if spec is None:
+        spec = {}
+    if isinstance(spec, str):
+        spec = {"type": spec}
+    kwargs = dict(spec)
+    type_name = kwargs.pop("type", "augmentation")
+    strategy = build_from_spec(
+        STRATEGIES.lookup(type_name, path="strategy.type"), kwargs, path="strategy"
+    )
+    tasks = controller.tasks.values()
+    strategy.bind(
+        controller.robot,
+        [(t.name, t.dim, t.level) for t in tasks],
+        controller.n_rows,
+        lambda: make_solver(controller.solver_spec, path="solver"),
+    )
+    return strategy
+
+
+class AccelerationLevel:
+    r"""CRAC at acceleration level for a :class:`~qpretarget.controller.Controller`.
+
+    Built by the controller when its YAML says ``level: acceleration``; ``Controller.step``
+    returns :meth:`step`. The controller's :attr:`strategy` solves the acceleration QP, a second
+    instance of the same strategy solves the velocity-level reference :math:`\dot q_c`.
+
+    Args:
+        controller: the controller whose tasks, constraints, regularization and strategy are used.
+        spec: the YAML ``acceleration:`` mapping (keys of :class:`AccelerationGains`) or ``None``.
+
+    Attributes:
+        gains: the :class:`AccelerationGains` in force.
+        damping: :math:`\lambda` of both QPs (YAML ``regularization.damping``, else 0.1).
+        alpha: resolved acceleration :math:`\alpha` of the last tick (nv,).
+        alpha_c: constrained resolved acceleration :math:`\alpha_c` of the last tick (nv,).
+        qdot_c: velocity-level reference :math:`\dot q_c` of the last tick (nv,).
+
+    Raises:
+        ConfigError: on an invalid ``acceleration:`` section.
+    """
+
+    def __init__(self, controller: Controller, spec: Mapping[str, Any] | None = None) -> None:
+        if spec is None:
+            spec = {}
+        if not isinstance(spec, Mapping):
+            raise ConfigError(
+                f"expected a mapping such as {{kp: 300, kv: null, gv: 30}}, got {spec!r}.",
+                path="acceleration",
+            )
+        self.gains: AccelerationGains = build_from_spec(
+            AccelerationGains, dict(spec), path="acceleration"
+        )
+        self.ctrl = controller
+        robot = controller.robot
+        self.robot = robot
+        self.model = robot.model
+        reg_spec = controller.config.get("regularization")
+        has_damping = isinstance(reg_spec, Mapping) and "damping" in reg_spec
+        self.damping = controller.regularization.damping if has_damping else PAPER_DAMPING
+        self.velocity_strategy = _rebuild_strategy(controller)
+        self._dyn_data = self.model.createData()  # RNEA works on its own data
+        self._tasks: list[Task] = list(controller.tasks.values())
+        nv = robot.nv
+        # Drift terms: exact for frame tasks (classical acceleration) and the CoM (pinocchio),
+        # zero for constant Jacobians, finite differences for any other task.
+        self._drift_kind: list[str] = []
+        for t in self._tasks:
+            if isinstance(t, (PostureTask, DampingTask)) or getattr(t, "constant_jacobian", False):
+                self._drift_kind.append("zero")
+            elif isinstance(t, ComTask):
+                self._drift_kind.append("com")
+            elif type(t).compute_jdot_v is not Task.compute_jdot_v:
+                self._drift_kind.append("task")
+            else:
+                self._drift_kind.append("fd")
+        self._fd_state = RobotState(robot) if "fd" in self._drift_kind else None
+        self._zero_v = np.zeros(nv)
+        self._lb = np.empty(nv)
+        self._ub = np.empty(nv)
+        n_rows = controller.n_rows
+        self._l = np.empty(n_rows)
+        self._u = np.empty(n_rows)
+        self._prev_vd: dict[str, np.ndarray] = {}
+        self.alpha = np.zeros(nv)
+        self.alpha_c = np.zeros(nv)
+        self.qdot_c = np.zeros(nv)
+
+    # ------------------------------------------------------------------ lifecycle
+    def reset(self) -> None:
+        """Drop warm starts and feed-forward history (called by ``Controller.reset``)."""
+        self.velocity_strategy.reset()
+        self._prev_vd.clear()
+        self.alpha = np.zeros(self.robot.nv)
+        self.alpha_c = np.zeros(self.robot.nv)
+        self.qdot_c = np.zeros(self.robot.nv)
+
+    # ------------------------------------------------------------------ maths
+    def compute_drifts(self, state: RobotState) -> list[np.ndarray]:
+        r"""Drift :math:`\dot J_i \dot q` of every task (CRAC eq. 9), in task order.
+
+        Runs one ``forwardKinematics(q, v, 0)`` on the state's data (joint velocities and
+        bias accelerations; the cached Jacobians are untouched).
+        """
+        model, data, q, v = self.model, state.data, state.q, state.v
+        pin.forwardKinematics(model, data, q, v, self._zero_v)
+        out: list[np.ndarray] = []
+        com_acc = None
+        fd_J: dict[int, np.ndarray] = {}
+        if self._fd_state is not None:
+            # Finite difference of J along v for tasks without an analytic drift: J(q + h v) v.
+            h = 1e-7
+            self._fd_state.update(pin.integrate(model, q, v * h), v)
+            for i, (t, kind) in enumerate(zip(self._tasks, self._drift_kind, strict=True)):
+                if kind == "fd":
+                    fd_J[i] = (
+                        (t.compute_jacobian(self._fd_state) - t.compute_jacobian(state)) @ v / h
+                    )
+        for i, (t, kind) in enumerate(zip(self._tasks, self._drift_kind, strict=True)):
+            if kind == "zero":
+                out.append(np.zeros(t.dim))
+            elif kind == "task":
+                out.append(np.asarray(t.compute_jdot_v(state), dtype=float))
+            elif kind == "com":
+                if com_acc is None:
+                    pin.centerOfMass(model, data, pin.KinematicLevel.ACCELERATION, False)
+                    com_acc = data.acom[0].copy()
+                out.append(com_acc[t.rows])  # type: ignore[attr-defined]
+            else:  # kind == "fd"
+                out.append(fd_J[i])
+        return out
+
+    def acceleration_blocks(self, tp: TickProblem, drifts: list[np.ndarray]) -> list[CostBlock]:
+        r"""Acceleration-QP blocks, reference :math:`a^*_i - \dot J_i \dot q` (CRAC eq. 11).
+
+        :math:`v_{d,i}` is the task's feed-forward velocity (its ``v_star`` minus :math:`K e`,
+        non-zero only with ``feedforward: true``); :math:`a_{d,i}` its finite difference over
+        the ticks.
+        """
+        g, v, dt = self.gains, tp.state.v, tp.dt
+        blocks = []
+        for t, b, jdv in zip(self._tasks, tp.blocks, drifts, strict=True):
+            a_star = g.kp * b.error - g.kv * (b.J @ v)  # K_v (v_d - J v) + K_p e with v_d = 0
+            if t.feedforward:
+                vd = b.v_star - t.effective_gain(dt) * b.error
+                prev = self._prev_vd.get(t.name)
+                a_star += g.kv * vd
+                if prev is not None:
+                    a_star += (vd - prev) / dt
+                self._prev_vd[t.name] = vd
+            blocks.append(CostBlock(b.task, b.J, a_star - jdv, b.weight, b.level, b.error))
+        return blocks
+
+    def _velocity_blocks(self, tp: TickProblem) -> list[CostBlock]:
+        """The velocity-level blocks, with ``velocity_gain`` replacing the tasks' gain if set."""
+        K = self.gains.velocity_gain
+        if K is None:
+            return tp.blocks
+        Kc = min(K, 1.0 / tp.dt)
+        return [
+            CostBlock(
+                b.task,
+                b.J,
+                b.v_star + (Kc - t.effective_gain(tp.dt)) * b.error,
+                b.weight,
+                b.level,
+                b.error,
+            )
+            for t, b in zip(self._tasks, tp.blocks, strict=True)
+        ]
+
+    def _solve(
+        self, strategy: Strategy, tp: TickProblem
+    ) -> tuple[np.ndarray | None, StrategyResult, dict[str, float]]:
+        """Solve with ``strategy``, then with the controller's fallback; ``None`` if both fail."""
+        res = strategy.solve(tp)
+        x = res.x if res.success and res.x is not None and np.all(np.isfinite(res.x)) else None
+        relaxed: dict[str, float] = {}
+        if x is None and self.ctrl.fallback is not None:
+            fb = self.ctrl.fallback.solve(tp, res)
+            if fb is not None and fb.x is not None and np.all(np.isfinite(fb.x)):
+                x = fb.x
+                relaxed = dict(fb.relaxed)
+        return x, res, relaxed
+
+    # ------------------------------------------------------------------ loop
+    def step(
+        self, targets: Mapping[str, Any] | None = None, *, dt: float | None = None
+    ) -> StepResult:
+        """One CRAC tick (see the module docstring); returns a ``StepResult`` with ``tau``.
+
+        Raises:
+            TargetError: on an unknown task name, a malformed target or an invalid ``dt``.
+        """
+        from .controller import StepResult
+
+        ctrl = self.ctrl
+        t0 = time.perf_counter()
+        if dt is None:
+            dt = ctrl.dt
+        elif isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0 < dt < 1:
+            raise TargetError(
+                f"dt must be a number of seconds in (0, 1), got {dt!r}.", tick=ctrl.tick + 1
+            )
+        dt = float(dt)
+        ctrl.tick += 1
+        messages: list[str] = []
+        ctrl.set_targets(targets, messages)
+        state = ctrl.state
+        q, v = state.q, state.v
+        tb = time.perf_counter()
+        tp = ctrl.build_tick(dt)
+        tp.damping = self.damping
+        relaxed = dict(getattr(ctrl, "_bound_gave", {}))
+        drifts = self.compute_drifts(state)
+        build_time = time.perf_counter() - tb
+
+        # 1. Velocity-level reference qdot_c (CRAC eq. 16 / 41).
+        blocks_v = self._velocity_blocks(tp)
+        tp_v = TickProblem(
+            state, dt, blocks_v, tp.C, tp.l, tp.u, tp.lb, tp.ub, tp.W, tp.damping, tp.tick
+        )
+        qdot_c, res_v, rel_v = self._solve(self.velocity_strategy, tp_v)
+        relaxed.update(rel_v)
+        if qdot_c is None:
+            qdot_c = v.copy()
+            messages.append(
+                f"tick {ctrl.tick}: no velocity-level reference qdot_c (solver status "
+                f"{res_v.status}); G_v pull off this tick (qdot_c = qdot)."
+            )
+        tb = time.perf_counter()
+        s = self.gains.gv * (qdot_c - v)  # (nv,) CRAC eq. 31 shift
+
+        # 2. Resolved acceleration QP (CRAC eq. 9-14) with transcribed hard constraints.
+        inv_dt = 1.0 / dt
+        np.subtract(tp.lb, v, out=self._lb)
+        self._lb *= inv_dt
+        self._lb -= s
+        np.subtract(tp.ub, v, out=self._ub)
+        self._ub *= inv_dt
+        self._ub -= s
+        if ctrl.n_rows:
+            Cv_s = tp.C @ (v * inv_dt + s)
+            np.multiply(tp.l, inv_dt, out=self._l)
+            self._l -= Cv_s
+            np.multiply(tp.u, inv_dt, out=self._u)
+            self._u -= Cv_s
+        blocks_a = self.acceleration_blocks(tp, drifts)
+        tp_a = TickProblem(
+            state,
+            dt,
+            blocks_a,
+            tp.C,
+            self._l,
+            self._u,
+            self._lb,
+            self._ub,
+            tp.W,
+            tp.damping,
+            tp.tick,
+        )
+        build_time += time.perf_counter() - tb
+        alpha, res_a, rel_a = self._solve(ctrl.strategy, tp_a)
+        relaxed.update(rel_a)
+        status = "relaxed" if relaxed else "ok"
+        if alpha is None:
+            # Hold as the velocity level does: stop within the tick (v+ = 0, q+ = q).
+            v_next = np.zeros_like(v)
+            status = "held"
+            messages.append(
+                f"tick {ctrl.tick}: no usable acceleration QP solution (solver status "
+                f"{res_a.status}); holding the configuration (alpha_c = -qdot/dt, v = 0)."
+            )
+        else:
+            v_next = v + (alpha + s) * dt  # CRAC eq. 31, integrated
+            # Solvers meet bounds to their tolerance; the box is cheap to meet exactly.
+            np.clip(v_next, tp.lb, tp.ub, out=v_next)
+        # alpha_c of the motion actually applied (equals alpha + s up to the clip above).
+        alpha_c = (v_next - v) * inv_dt
+        if alpha is None:
+            alpha = alpha_c - s
+
+        # 3. Torques (CRAC eq. 30) and semi-implicit integration.
+        tau = pin.rnea(self.model, self._dyn_data, q, v, alpha_c).copy()
+        q_next = pin.integrate(self.model, q, v_next * dt)
+        errors = {b.task: ctrl.tasks[b.task].error_norm(b.error) for b in tp.blocks}
+        for con in ctrl.constraints:
+            con.after_step(state, v_next, dt)
+        self.alpha, self.alpha_c, self.qdot_c = alpha, alpha_c, qdot_c
+        ctrl.v = v_next
+        state.update(q_next, v_next)
+        ctrl.t += dt
+        q_out = q_next.copy()
+        q_out.setflags(write=False)
+        v_out = v_next.copy()
+        v_out.setflags(write=False)
+        tau.setflags(write=False)
+        return StepResult(
+            q=q_out,
+            v=v_out,
+            tick=ctrl.tick,
+            t=ctrl.t,
+            status=status,
+            solver_status=res_a.status,
+            task_errors=errors,
+            solve_time=res_v.solve_time + res_a.solve_time,
+            build_time=build_time,
+            step_time=time.perf_counter() - t0,
+            iterations=res_v.iterations + res_a.iterations,
+            relaxed=relaxed,
+            messages=messages,
+            tau=tau,
+        )
+
+    def __repr__(self) -> str:
+        g = self.gains
+        return (
+            f"AccelerationLevel(kp={g.kp}, kv={g.kv}, gv={g.gv}, velocity_gain={g.velocity_gain}, "
+            f"damping={self.damping}, strategy={self.ctrl.strategy!r})"
+        )
