@@ -222,6 +222,8 @@ class Controller:
         self._lb = np.empty(self.robot.nv)
         self._ub = np.empty(self.robot.nv)
         self.state = RobotState(self.robot)
+        #: Seconds spent in each stage of the last tick (read by ``qpretarget bench``).
+        self.last_timings: dict[str, float] = {}
         self.tick = 0
         self.t = 0.0
         self.v = np.zeros(self.robot.nv)
@@ -384,7 +386,12 @@ class Controller:
     def build_tick(self, dt: float) -> TickProblem:
         """Build every block of this tick (used by ``step`` and by solver comparisons)."""
         state = self.state
+        timings = self.last_timings
+        perf = time.perf_counter
+        t0 = perf()
         blocks = [t.block(state, dt) for t in self.tasks.values()]
+        t1 = perf()
+        timings["tasks"] = t1 - t0
         lb, ub = self._lb, self._ub
         lb.fill(-np.inf)
         ub.fill(np.inf)
@@ -406,9 +413,13 @@ class Controller:
                 new_lb[bad] = np.minimum(new_lb[bad], new_ub[bad])
             lb[...] = new_lb
             ub[...] = new_ub
+        t2 = perf()
+        timings["bounds"] = t2 - t1
         i = 0
         for con in self._row_constraints:
+            tc = perf()
             blk = con.compute_rows(state, dt)
+            timings[con.name] = perf() - tc
             k = con.n_rows
             if blk is None:
                 self._C[i : i + k] = 0.0
@@ -419,7 +430,9 @@ class Controller:
                 self._l[i : i + k] = blk.l
                 self._u[i : i + k] = blk.u
             i += k
+        t3 = perf()
         W = self.regularization.matrix(state, dt)
+        timings["regularization"] = perf() - t3
         return TickProblem(
             state,
             dt,
@@ -468,7 +481,10 @@ class Controller:
         build_time = time.perf_counter() - tb
         status = "ok"
         relaxed = dict(self._bound_gave)
+        ts = time.perf_counter()
         res = self.strategy.solve(tp)
+        self.last_timings["assembly"] = time.perf_counter() - ts - res.solve_time
+        self.last_timings["solve"] = res.solve_time
         v = res.x
         if v is not None and not res.success:
             v = None
@@ -501,7 +517,9 @@ class Controller:
         for con in self.constraints:
             con.after_step(state, v, dt)
         self.v = v
+        tk = time.perf_counter()
         state.update(q_next, v)
+        self.last_timings["kinematics"] = time.perf_counter() - tk
         self.t += dt
         q_out = q_next.copy()
         q_out.setflags(write=False)
