@@ -50,7 +50,11 @@ def machine_info() -> dict[str, Any]:
 
 def _stats(x: Sequence[float]) -> dict[str, float]:
     a = np.asarray(x, dtype=float) * 1e6
-    return {"median_us": float(np.median(a)), "p95_us": float(np.percentile(a, 95)), "max_us": float(a.max())}
+    return {
+        "median_us": float(np.median(a)),
+        "p95_us": float(np.percentile(a, 95)),
+        "max_us": float(a.max()),
+    }
 
 
 def load_config(config: str | Path | dict[str, Any]) -> tuple[dict[str, Any], Path | None]:
@@ -110,7 +114,9 @@ def bench_config(
         wall.append(perf() - w0)
     return {
         "config": str(config) if not isinstance(config, dict) else cfg.get("name", "config"),
-        "solver": (cfg.get("solver") or {}).get("name", "proxsuite") if isinstance(cfg.get("solver"), dict) else str(cfg.get("solver", "proxsuite")),
+        "solver": (cfg.get("solver") or {}).get("name", "proxsuite")
+        if isinstance(cfg.get("solver"), dict)
+        else str(cfg.get("solver", "proxsuite")),
         "ticks": ticks * passes,
         "ticks_per_s": float(ticks / np.median(wall)),
         "step": _stats(step_t),

@@ -19,7 +19,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("configs", nargs="*", default=[str(REPO / "configs" / "g1_augmentation.yaml")])
     ap.add_argument("--solvers", default="proxsuite")
     ap.add_argument("--ticks", type=int, default=1000)

@@ -23,7 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("config", help="controller YAML")
-    p.add_argument("--solvers", default=None, help="comma-separated solvers (default: the config's)")
+    p.add_argument(
+        "--solvers", default=None, help="comma-separated solvers (default: the config's)"
+    )
     p.add_argument("--ticks", type=int, default=1000, help="timed ticks per pass (default 1000)")
     p.add_argument("--passes", type=int, default=3, help="timed passes (default 3)")
     p.add_argument("--warmup", type=int, default=200, help="untimed ticks first (default 200)")
@@ -43,7 +45,9 @@ def run(args: argparse.Namespace) -> int:
     results = []
     for s in solvers:
         results.append(
-            bench_config(args.config, solver=s, ticks=args.ticks, warmup=args.warmup, passes=args.passes)
+            bench_config(
+                args.config, solver=s, ticks=args.ticks, warmup=args.warmup, passes=args.passes
+            )
         )
     print(format_table(results))
     for r in results:
