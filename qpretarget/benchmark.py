@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Per-tick timing of a controller: ticks per second, median and p95 of step and solve time,
-split by stage (tasks, bounds, each row constraint, assembly, solve, kinematics).
+"""Per-tick timing of a controller: ticks per second, median and p95 of step and solve time.
+
+Times are also split by stage (tasks, bounds, each row constraint, assembly, solve, kinematics).
 
 Used by ``qpretarget bench`` and ``scripts/bench_step.py``. Timing uses ``time.perf_counter``
 around the public :meth:`Controller.step` (targets in, solve, integrate, kinematics out), after
@@ -129,7 +130,8 @@ def bench_config(
 def format_table(results: list[dict[str, Any]]) -> str:
     """Markdown table of :func:`bench_config` results."""
     lines = [
-        "| config | solver | ticks/s | step median µs | step p95 µs | solve median µs | solve p95 µs | held |",
+        "| config | solver | ticks/s | step median µs | step p95 µs | solve median µs "
+        "| solve p95 µs | held |",
         "|---|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results:
