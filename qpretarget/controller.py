@@ -41,6 +41,32 @@ TOP_LEVEL_KEYS = (
 )  # fmt: skip
 
 
+class TaskErrors(Mapping[str, float]):
+    """Task name -> error norm, computed on first access (keeps ``step`` cheap when unread)."""
+
+    __slots__ = ("_blocks", "_tasks", "_d")
+
+    def __init__(self, blocks: list, tasks: Mapping[str, Task]) -> None:
+        self._blocks, self._tasks, self._d = blocks, tasks, None
+
+    def _dict(self) -> dict[str, float]:
+        if self._d is None:
+            self._d = {b.task: self._tasks[b.task].error_norm(b.error) for b in self._blocks}
+        return self._d
+
+    def __getitem__(self, key: str) -> float:
+        return self._dict()[key]
+
+    def __iter__(self):  # noqa: ANN204
+        return iter(self._dict())
+
+    def __len__(self) -> int:
+        return len(self._blocks)
+
+    def __repr__(self) -> str:
+        return repr(self._dict())
+
+
 @dataclass(slots=True)
 class StepResult:
     """Outcome of one tick.
@@ -70,7 +96,7 @@ class StepResult:
     t: float
     status: str
     solver_status: str
-    task_errors: dict[str, float]
+    task_errors: Mapping[str, float]
     solve_time: float
     build_time: float
     step_time: float
@@ -396,11 +422,17 @@ class Controller:
         lb.fill(-np.inf)
         ub.fill(np.inf)
         self._bound_gave: dict[str, float] = {}
+        first = True
         for con in self._bound_constraints:
             b = con.compute_bounds(state, dt)
             if b is None:
                 continue
             clo, chi = b
+            if first:  # the most important bounds go in as they are
+                np.copyto(lb, clo)
+                np.copyto(ub, chi)
+                first = False
+                continue
             new_lb = np.maximum(lb, clo)
             new_ub = np.minimum(ub, chi)
             bad = new_lb > new_ub
@@ -512,7 +544,7 @@ class Controller:
             # Solvers meet bounds to their tolerance; the box is cheap to meet exactly.
             np.clip(v, tp.lb, tp.ub, out=v)
         state = self.state
-        errors = {b.task: self.tasks[b.task].error_norm(b.error) for b in tp.blocks}
+        errors = TaskErrors(tp.blocks, self.tasks)
         q_next = self.robot.integrate(state.q, v, dt)
         for con in self.constraints:
             con.after_step(state, v, dt)

@@ -17,8 +17,12 @@ from ..problem import INF, QPProblem
 from .base import QPSolution, QPSolver
 
 
+_SOLVED = proxqp.QPSolverOutput.PROXQP_SOLVED
+_STATUS: dict = {}
+
+
 class ProxSuiteSolver(QPSolver):
-    """Warm-started dense ProxQP; box bounds are passed as identity rows.
+    """Warm-started dense ProxQP with native box constraints.
 
     Args:
         eps_abs: absolute tolerance (primal and dual residuals).
@@ -43,7 +47,7 @@ class ProxSuiteSolver(QPSolver):
         self.warm_start, self.verbose = bool(warm_start), bool(verbose)
         self._qp: Any = None
         self._shape: tuple[int, int] | None = None
-        self._C = self._l = self._u = None
+        self._l = self._u = None
         self._keep = None
         self._fresh = True
 
@@ -60,38 +64,41 @@ class ProxSuiteSolver(QPSolver):
         }
 
     def _fill(self, problem: QPProblem) -> None:
-        """Stack the rows and the box as ``[C; I]`` (ProxSuite 0.8's box mode is less accurate)."""
-        m = problem.n_in
-        self._C[:m] = problem.C
-        np.clip(problem.l, -INF, INF, out=self._l[:m])
-        np.clip(problem.u, -INF, INF, out=self._u[:m])
-        np.clip(problem.lb, -INF, INF, out=self._l[m:])
-        np.clip(problem.ub, -INF, INF, out=self._u[m:])
+        # Row bounds: +-inf become +-1e20 (ProxSuite's box accepts inf as is, rows are safer so).
+        if problem.n_in:
+            np.maximum(problem.l, -INF, out=self._l)
+            np.minimum(problem.u, INF, out=self._u)
 
     def solve(self, problem: QPProblem) -> QPSolution:
         t0 = time.perf_counter()
         shape = (problem.n, problem.n_in)
+        n, m = shape
         if self._qp is None or shape != self._shape:
-            n, m = problem.n, problem.n_in
-            self._C = np.zeros((m + n, n))
-            self._C[m:] = np.eye(n)
-            self._l, self._u = np.empty(m + n), np.empty(m + n)
+            self._l, self._u = np.empty(m), np.empty(m)
             self._fill(problem)
-            qp = proxqp.dense.QP(n, 0, m + n, False)
+            qp = proxqp.dense.QP(n, 0, m, True)
             s = qp.settings
-            s.eps_abs, s.eps_rel, s.max_iter, s.verbose = (
-                self.eps_abs,
-                self.eps_rel,
-                self.max_iter,
-                self.verbose,
+            s.eps_abs, s.eps_rel = self.eps_abs, self.eps_rel
+            s.max_iter, s.verbose = self.max_iter, self.verbose
+            qp.init(
+                problem.H,
+                problem.g,
+                None,
+                None,
+                problem.C,
+                self._l,
+                self._u,
+                problem.lb,
+                problem.ub,
             )
-            qp.init(problem.H, problem.g, None, None, self._C, self._l, self._u)
             self._fresh = True
             self._keep = self._qp  # keep the old workspace alive until the new one exists
             self._qp, self._shape = qp, shape
         else:
             self._fill(problem)
-            self._qp.update(problem.H, problem.g, None, None, self._C, self._l, self._u)
+            C = problem.C if m else None
+            self._qp.update(problem.H, problem.g, None, None, C, self._l if m else None,
+                            self._u if m else None, problem.lb, problem.ub)  # fmt: skip
         self._qp.solve()
         if self._fresh and self.warm_start:
             # Only once a result exists: ProxSuite 0.8 crashes when asked to warm-start from
@@ -99,17 +106,16 @@ class ProxSuiteSolver(QPSolver):
             self._qp.settings.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
             self._fresh = False
         res = self._qp.results
-        status = res.info.status
-        ok = status == proxqp.QPSolverOutput.PROXQP_SOLVED
-        x = res.x.copy() if np.all(np.isfinite(res.x)) else None
+        info = res.info
+        status = info.status
+        ok = status == _SOLVED
+        x = res.x.copy()
+        if not np.isfinite(x).all():
+            x, ok = None, False
         if not ok:
             # A failed solve leaves a poor warm start: rebuild the workspace next tick.
             self._shape = None
-        return QPSolution(
-            x=x,
-            success=ok and x is not None,
-            status=str(status).split(".")[-1],
-            iterations=int(res.info.iter),
-            solve_time=time.perf_counter() - t0,
-            extras={"z": res.z.copy() if ok else None, "pri_res": float(res.info.pri_res)},
-        )
+        name = _STATUS.get(status)
+        if name is None:
+            name = _STATUS[status] = str(status).split(".")[-1]
+        return QPSolution(x, ok, name, info.iter, time.perf_counter() - t0)

@@ -33,6 +33,7 @@ class Augmentation(Strategy):
         self._rw = np.zeros(m)
         self._problem = QPProblem(robot.nv, n_rows)
         self._solver = solver_factory()
+        self._sqrt_cache = [(None, None)] * len(task_dims)
 
     def reset(self) -> None:
         self._solver.reset()
@@ -44,9 +45,13 @@ class Augmentation(Strategy):
         """Fill the QP of this tick (exposed for tests and solver comparisons)."""
         Jw, rw, p = self._Jw, self._rw, self._problem
         i = 0
-        for b in tp.blocks:
+        cache = self._sqrt_cache
+        for j, b in enumerate(tp.blocks):
             k = b.J.shape[0]
-            sw = np.sqrt(b.weight)
+            w, sw = cache[j]
+            if b.weight is not w:  # weights rarely change: reuse their square root
+                sw = np.sqrt(b.weight)
+                cache[j] = (b.weight, sw)
             np.multiply(b.J, sw[:, None], out=Jw[i : i + k])
             np.multiply(b.v_star, sw, out=rw[i : i + k])
             i += k

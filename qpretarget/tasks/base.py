@@ -141,7 +141,8 @@ class Task(abc.ABC):
         """This tick's cost rows (Dariush 2009 eq. 9: ``v* = v_d + K e``)."""
         e = self.compute_error(state)
         J = self.compute_jacobian(state)
-        v_star = self.effective_gain(dt) * e
+        gain = self.gain
+        v_star = e * (1.0 / dt if gain is None or gain * dt > 1.0 else gain)
         if self.feedforward and self._ff is not None:
             v_star = v_star + self._ff
         w = self.weight

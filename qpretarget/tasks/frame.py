@@ -36,6 +36,14 @@ def orientation_error(R: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
     return 0.5 * np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])
 
 
+_EYE3 = np.eye(3)
+
+
+def _is_rotation(R: np.ndarray) -> bool:
+    """``R'R = I`` and ``det R = 1`` to 1e-3 (cheap enough for every tick)."""
+    return bool(np.abs(R.T @ R - _EYE3).max() < 1e-3 and abs(np.linalg.det(R) - 1.0) < 1e-3)
+
+
 def skew(v: np.ndarray) -> np.ndarray:
     """Skew-symmetric matrix with ``skew(a) @ b == cross(a, b)``."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
@@ -108,7 +116,7 @@ class FrameTask(Task):
     # ------------------------------------------------------------------ state
     def current_pose(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         """World position of the tracked point and world rotation of the frame."""
-        M = state.frame_placement(self.frame_id)
+        M = state.data.oMf[self.frame_id]
         R = M.rotation
         p = M.translation if self.offset is None else M.translation + R @ self.offset
         return p, R
@@ -134,6 +142,13 @@ class FrameTask(Task):
             TargetError: on a wrong shape or type, on a rotation given to a position-only task
                 (or a position to an orientation-only task), on a matrix that is not a rotation.
         """
+        if type(target) is np.ndarray and target.shape == (3,) and self.has_position:
+            # Fast path: a position array (the common case in a 100 Hz loop).
+            if not np.isfinite(target).all():
+                return False
+            self._prev_position = self.position_target
+            self.position_target = target.astype(float, copy=True)
+            return True
         position = rotation = None
         if isinstance(target, pin.SE3):
             position, rotation = target.translation.copy(), target.rotation.copy()
@@ -175,10 +190,7 @@ class FrameTask(Task):
         for x in (position, rotation):
             if x is not None and not np.all(np.isfinite(x)):
                 return False
-        if rotation is not None and (
-            abs(np.linalg.det(rotation) - 1.0) > 1e-3
-            or not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-3)
-        ):
+        if rotation is not None and not _is_rotation(rotation):
             raise TargetError(
                 "rotation target is not a rotation matrix (R'R != I or det(R) != 1).",
                 task=self.name,
@@ -194,25 +206,34 @@ class FrameTask(Task):
 
     # ------------------------------------------------------------------ maths
     def compute_error(self, state: RobotState) -> np.ndarray:
-        p, R = self.current_pose(state)
-        if self.mode == "position":
-            return self.position_target - p
+        M = state.data.oMf[self.frame_id]
+        if self.offset is None and self.mode == "position":
+            return self.position_target - M.translation
+        R = M.rotation
         if self.mode == "orientation":
             return orientation_error(R, self.rotation_target)
-        return np.concatenate(
-            [self.position_target - p, orientation_error(R, self.rotation_target)]
-        )
+        p = M.translation if self.offset is None else M.translation + R @ self.offset
+        if self.mode == "position":
+            return self.position_target - p
+        e = np.empty(6)
+        np.subtract(self.position_target, p, out=e[:3])
+        e[3:] = orientation_error(R, self.rotation_target)
+        return e
 
     def compute_jacobian(self, state: RobotState) -> np.ndarray:
         J6 = state.frame_jacobian(self.frame_id)
-        if self.mode == "orientation":
-            return J6[3:]
-        Jp = J6[:3]
-        if self.offset is not None:
-            R = state.frame_placement(self.frame_id).rotation
-            Jp = Jp - skew(R @ self.offset) @ J6[3:]
+        if self.offset is None:
+            if self.mode == "position":
+                return J6[:3]
+            if self.mode == "orientation":
+                return J6[3:]
+            return J6  # rows [linear; angular], the order of compute_error
+        R = state.data.oMf[self.frame_id].rotation
+        Jp = J6[:3] - skew(R @ self.offset) @ J6[3:]
         if self.mode == "position":
             return Jp
+        if self.mode == "orientation":
+            return J6[3:]
         return np.vstack([Jp, J6[3:]])
 
     def compute_jdot_v(self, state: RobotState) -> np.ndarray:
