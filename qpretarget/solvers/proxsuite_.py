@@ -16,7 +16,6 @@ from proxsuite import proxqp
 from ..problem import INF, QPProblem
 from .base import QPSolution, QPSolver
 
-
 _SOLVED = proxqp.QPSolverOutput.PROXQP_SOLVED
 _STATUS: dict = {}
 
