@@ -182,8 +182,8 @@ class AccelerationLevel:
                 self._drift_kind.append("fd")
         self._fd_state = RobotState(robot) if "fd" in self._drift_kind else None
         self._zero_v = np.zeros(nv)
-        self._lb = np.empty(nv)
-        self._ub = np.empty(nv)
+        self._lb, self._ub = np.empty(nv), np.empty(nv)  # bounds on alpha
+        self._lbv, self._ubv = np.empty(nv), np.empty(nv)  # velocity-level box containing qdot_c
         n_rows = controller.n_rows
         self._l = np.empty(n_rows)
         self._u = np.empty(n_rows)
@@ -275,13 +275,17 @@ class AccelerationLevel:
             for t, b in zip(self._tasks, tp.blocks, strict=True)
         ]
 
-    def _solve(
-        self, strategy: Strategy, tp: TickProblem
-    ) -> tuple[np.ndarray | None, StrategyResult, dict[str, float]]:
-        """Solve with ``strategy``, then with the controller's fallback; ``None`` if both fail."""
-        res = strategy.solve(tp)
+    def _solve_velocity(
+        self, tp: TickProblem
+    ) -> tuple[np.ndarray | None, StrategyResult, dict[str, float] | None]:
+        """Velocity-level solve, then the controller's fallback; ``None`` if both fail.
+
+        Returns:
+            ``(qdot_c, result, relaxed)`` with ``relaxed`` ``None`` unless the fallback was used.
+        """
+        res = self.velocity_strategy.solve(tp)
         x = res.x if res.success and res.x is not None and np.all(np.isfinite(res.x)) else None
-        relaxed: dict[str, float] = {}
+        relaxed: dict[str, float] | None = None
         if x is None and self.ctrl.fallback is not None:
             fb = self.ctrl.fallback.solve(tp, res)
             if fb is not None and fb.x is not None and np.all(np.isfinite(fb.x)):
@@ -321,70 +325,79 @@ class AccelerationLevel:
         drifts = self.compute_drifts(state)
         build_time = time.perf_counter() - tb
 
-        # 1. Velocity-level reference qdot_c (CRAC eq. 16 / 41).
+        # 1. Velocity-level reference qdot_c (CRAC eq. 16 / 41). Conflicting hard constraints are
+        #    relaxed here, once per tick, by the controller's fallback (when installed).
         blocks_v = self._velocity_blocks(tp)
         tp_v = TickProblem(
             state, dt, blocks_v, tp.C, tp.l, tp.u, tp.lb, tp.ub, tp.W, tp.damping, tp.tick
         )
-        qdot_c, res_v, rel_v = self._solve(self.velocity_strategy, tp_v)
-        relaxed.update(rel_v)
-        if qdot_c is None:
-            qdot_c = v.copy()
+        qdot_c, res_v, rel_v = self._solve_velocity(tp_v)
+        relaxed.update(rel_v or {})
+        if rel_v is not None:
             messages.append(
-                f"tick {ctrl.tick}: no velocity-level reference qdot_c (solver status "
-                f"{res_v.status}); G_v pull off this tick (qdot_c = qdot)."
+                f"tick {ctrl.tick}: hard constraints conflicted ({res_v.status}); relaxed {rel_v}."
             )
-        tb = time.perf_counter()
-        s = self.gains.gv * (qdot_c - v)  # (nv,) CRAC eq. 31 shift
-
-        # 2. Resolved acceleration QP (CRAC eq. 9-14) with transcribed hard constraints.
-        inv_dt = 1.0 / dt
-        np.subtract(tp.lb, v, out=self._lb)
-        self._lb *= inv_dt
-        self._lb -= s
-        np.subtract(tp.ub, v, out=self._ub)
-        self._ub *= inv_dt
-        self._ub -= s
-        if ctrl.n_rows:
-            Cv_s = tp.C @ (v * inv_dt + s)
-            np.multiply(tp.l, inv_dt, out=self._l)
-            self._l -= Cv_s
-            np.multiply(tp.u, inv_dt, out=self._u)
-            self._u -= Cv_s
-        blocks_a = self.acceleration_blocks(tp, drifts)
-        tp_a = TickProblem(
-            state,
-            dt,
-            blocks_a,
-            tp.C,
-            self._l,
-            self._u,
-            self._lb,
-            self._ub,
-            tp.W,
-            tp.damping,
-            tp.tick,
-        )
-        build_time += time.perf_counter() - tb
-        alpha, res_a, rel_a = self._solve(ctrl.strategy, tp_a)
-        relaxed.update(rel_a)
         status = "relaxed" if relaxed else "ok"
-        if alpha is None:
-            # Hold as the velocity level does: stop within the tick (v+ = 0, q+ = q).
+        res_a: StrategyResult | None = None
+        inv_dt = 1.0 / dt
+        if qdot_c is None:
+            # No velocity-level solution: the acceleration QP has the same feasible set (the map
+            # alpha -> v+ is a bijection), so hold as the velocity level does: v+ = 0, q+ = q.
+            qdot_c = v.copy()
+            alpha = np.zeros_like(v)
             v_next = np.zeros_like(v)
             status = "held"
             messages.append(
-                f"tick {ctrl.tick}: no usable acceleration QP solution (solver status "
-                f"{res_a.status}); holding the configuration (alpha_c = -qdot/dt, v = 0)."
+                f"tick {ctrl.tick}: no usable velocity-level solution (solver status "
+                f"{res_v.status}); holding the configuration (alpha_c = -qdot/dt, v = 0)."
             )
         else:
+            tb = time.perf_counter()
+            s = self.gains.gv * (qdot_c - v)  # (nv,) CRAC eq. 31 shift
+            # 2. Resolved acceleration QP (CRAC eq. 9-14) with the hard constraints transcribed to
+            #    v+ = v + (alpha + s) dt. The map alpha -> v+ is a bijection, so this QP is feasible
+            #    exactly when the velocity-level one is. When the fallback had to relax the velocity
+            #    level, its set is widened to contain qdot_c: the QP keeps exactly that relaxation
+            #    and stays feasible (alpha = (qdot_c - v)/dt - s is a solution).
+            widen = rel_v is not None
+            lbv = np.minimum(tp.lb, qdot_c, out=self._lbv) if widen else tp.lb
+            ubv = np.maximum(tp.ub, qdot_c, out=self._ubv) if widen else tp.ub
+            np.subtract(lbv, v, out=self._lb)
+            self._lb *= inv_dt
+            self._lb -= s
+            np.subtract(ubv, v, out=self._ub)
+            self._ub *= inv_dt
+            self._ub -= s
+            if ctrl.n_rows:
+                Cq = tp.C @ qdot_c if widen else tp.l
+                Cv_s = tp.C @ (v * inv_dt + s)
+                np.minimum(tp.l, Cq, out=self._l)
+                self._l *= inv_dt
+                self._l -= Cv_s
+                np.maximum(tp.u, Cq if widen else tp.u, out=self._u)
+                self._u *= inv_dt
+                self._u -= Cv_s
+            blocks_a = self.acceleration_blocks(tp, drifts)
+            tp_a = TickProblem(
+                state, dt, blocks_a, tp.C, self._l, self._u, self._lb, self._ub, tp.W,
+                tp.damping, tp.tick,
+            )  # fmt: skip
+            build_time += time.perf_counter() - tb
+            res_a = ctrl.strategy.solve(tp_a)
+            ok = res_a.success and res_a.x is not None and np.all(np.isfinite(res_a.x))
+            if ok:
+                alpha = res_a.x
+            else:
+                alpha = (qdot_c - v) * inv_dt - s
+                messages.append(
+                    f"tick {ctrl.tick}: the acceleration QP failed (solver status "
+                    f"{res_a.status}); applying the velocity-level solution qdot_c this tick."
+                )
             v_next = v + (alpha + s) * dt  # CRAC eq. 31, integrated
             # Solvers meet bounds to their tolerance; the box is cheap to meet exactly.
-            np.clip(v_next, tp.lb, tp.ub, out=v_next)
-        # alpha_c of the motion actually applied (equals alpha + s up to the clip above).
+            np.clip(v_next, lbv, ubv, out=v_next)
+        # alpha_c of the motion actually applied (alpha + s up to the clip above).
         alpha_c = (v_next - v) * inv_dt
-        if alpha is None:
-            alpha = alpha_c - s
 
         # 3. Torques (CRAC eq. 30) and semi-implicit integration.
         tau = pin.rnea(self.model, self._dyn_data, q, v, alpha_c).copy()
@@ -407,12 +420,12 @@ class AccelerationLevel:
             tick=ctrl.tick,
             t=ctrl.t,
             status=status,
-            solver_status=res_a.status,
+            solver_status=(res_v if res_a is None else res_a).status,
             task_errors=errors,
-            solve_time=res_v.solve_time + res_a.solve_time,
+            solve_time=res_v.solve_time + (0.0 if res_a is None else res_a.solve_time),
             build_time=build_time,
             step_time=time.perf_counter() - t0,
-            iterations=res_v.iterations + res_a.iterations,
+            iterations=res_v.iterations + (0 if res_a is None else res_a.iterations),
             relaxed=relaxed,
             messages=messages,
             tau=tau,

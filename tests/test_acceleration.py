@@ -325,3 +325,69 @@ def test_acceleration_configs_track(path: Path) -> None:
     # 0.4 s at K_p = 300: the critically damped response alone leaves 0.3% of the error;
     # 20% leaves room for the compromise with the other tasks of over-constrained Task Set 1.
     assert res.task_errors[hand] < 0.2 * np.linalg.norm(target - p0)
+
+
+def test_conflicting_bounds_give_and_are_reported() -> None:
+    """A joint reset 0.2 rad beyond its limit: returning within a tick needs more than v_max."""
+    joint = "right_elbow_joint"
+    cfg = {
+        "robot": {"name": "g1", "velocity_limits": {joint: 0.5}},
+        "dt": 0.01,
+        "level": "acceleration",
+        "tasks": [{"type": "posture", "name": "posture", "weight": 1.0}],
+        "constraints": [{"type": "joint_limits", "gain": 0.9}, {"type": "velocity_limits"}],
+    }
+    ctrl = Controller(cfg)
+    robot = ctrl.robot
+    j = robot.joint_index(joint)
+    iq, iv = robot.joint_q_index[j], robot.joint_v_index[j]
+    q0 = robot.q_reference.copy()
+    q0[iq] = robot.q_max[iq] + 0.2
+    ctrl.reset(q0)
+    res = ctrl.step({})
+    # joint_limits (importance 90) gives to velocity_limits (95): the joint heads back at v_max.
+    assert res.status == "relaxed" and "joint_limits" in res.relaxed, (res.status, res.relaxed)
+    assert res.v[iv] == pytest.approx(-0.5, abs=1e-9)
+    assert np.all(np.abs(res.v) <= robot.v_max + 1e-12)
+    assert np.all(np.isfinite(res.tau))
+
+
+@pytest.mark.skipif(
+    "contacts" not in CONSTRAINTS, reason="the contacts constraint module is not installed"
+)
+def test_conflicting_rows_relax_through_the_fallback() -> None:
+    """Feet fixed, legs nearly frozen, a knee outside its range: contacts and limits conflict."""
+    from qpretarget import load_robot
+
+    slow = {
+        n: 0.01 for n in load_robot("g1").joint_names if n.split("_")[1] in ("hip", "knee", "ankle")
+    }
+    del slow["left_knee_joint"]
+    cfg = {
+        "robot": {"name": "g1", "velocity_limits": slow},
+        "dt": 0.01,
+        "level": "acceleration",
+        "tasks": [{"type": "posture", "name": "posture", "weight": 1.0}],
+        "constraints": [
+            {"type": "contacts"},
+            {"type": "joint_limits", "gain": 0.9},
+            {"type": "velocity_limits"},
+        ],
+    }
+    ctrl = Controller(cfg)
+    if ctrl.fallback is None:
+        pytest.skip("the relaxation module is not installed")
+    robot = ctrl.robot
+    iq = robot.joint_q_index[robot.joint_index("left_knee_joint")]
+    q0 = robot.q_reference.copy()
+    q0[iq] = robot.q_min[iq] - 0.1
+    ctrl.reset(q0)
+    res = ctrl.step({})
+    # The least important constraint gives (joint_limits, 90 < contacts 100, velocity_limits 95);
+    # the tick is not held and the torques are usable.
+    assert res.status == "relaxed" and set(res.relaxed) == {"joint_limits"}, res.relaxed
+    assert any("conflicted" in m for m in res.messages)
+    assert np.all(np.abs(res.v) <= robot.v_max + 1e-9)
+    assert np.all(np.isfinite(res.tau))
+    # the knee still moves back towards its range, as fast as the frozen legs allow
+    assert res.v[robot.joint_v_index[robot.joint_index("left_knee_joint")]] > 0.0
