@@ -130,7 +130,10 @@ def scripted_targets(
 
 
 def targets_from_run(traj: RobotTrajectory, controller: Controller) -> list[dict[str, np.ndarray]]:
-    """Targets of a saved run, one mapping per sample, for the controller's tasks of the same name.
+    """Targets of a saved run, one mapping per tick, for the controller's tasks of the same name.
+
+    Sample 0 of a run is the state before the first tick; samples 1..T-1 each end a tick, whose
+    targets are replayed.
 
     Raises:
         ComparisonError: when the run has no ``target/<task>`` the controller knows.
@@ -142,7 +145,7 @@ def targets_from_run(traj: RobotTrajectory, controller: Controller) -> list[dict
             f"are {sorted(controller.tasks)}: none match. Use a run made with this config."
         )
     T = len(traj.t)
-    return [{k: np.asarray(traj.targets[k][i], float) for k in names} for i in range(T)]
+    return [{k: np.asarray(traj.targets[k][i], float) for k in names} for i in range(1, T)]
 
 
 @dataclass

@@ -1,0 +1,152 @@
+# SPDX-License-Identifier: Apache-2.0
+"""``qpretarget evaluate``: metrics.json and figures of a saved run (docs/metrics.md)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+HELP = """examples:
+  qpretarget evaluate run.npz -o report/
+      metrics.json + tracking, pair distances, joint angles, violations, CoM, power figures
+  qpretarget evaluate run.npz -o report/ --before run_unconstrained.npz
+      the same motion retargeted with the constraints off, shown beside (CRAC Fig. 3-4, 11)
+  qpretarget evaluate run.npz -o report/ --no-figures --pairs left_wrist_yaw_link:torso_link
+      metrics only, for the collision pairs given
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``evaluate`` subcommand."""
+    p = sub.add_parser(
+        "evaluate",
+        help="metrics (metrics.json) and figures of a saved run",
+        description=(
+            "Recompute the metrics of a run from its trajectory and robot model (tracking RMSE, "
+            "joint-limit and self-collision violations per frame, pair distances, CoM margin, "
+            "foot slip, velocity/acceleration/jerk peaks, average absolute power of CRAC eq. 43, "
+            "solve times), write metrics.json and PNG figures."
+        ),
+        epilog=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("run", help="run file (.npz) written by qpretarget")
+    p.add_argument("-o", "--output", required=True, help="output directory")
+    p.add_argument("--before", help="the same motion run with the constraints off (.npz)")
+    p.add_argument(
+        "--pairs",
+        nargs="+",
+        metavar="LINK_A:LINK_B",
+        help="collision pairs to measure (default: the config's self-collision pairs)",
+    )
+    p.add_argument("--safety-distance", type=float, help="safety distance [m] drawn and counted")
+    p.add_argument(
+        "--joints", nargs="+", help="joints of the joint-angle figure (default: right arm)"
+    )
+    p.add_argument("--no-figures", action="store_true", help="write metrics.json only")
+    p.add_argument(
+        "--no-per-frame", action="store_true", help="leave per-frame arrays out of metrics.json"
+    )
+    p.set_defaults(func=run)
+
+
+def _pairs(values: list[str] | None) -> list[tuple[str, str]] | None:
+    from ..metrics import MetricsError
+
+    if not values:
+        return None
+    out = []
+    for v in values:
+        parts = v.split(":")
+        if len(parts) != 2 or not all(parts):
+            raise MetricsError(
+                f"--pairs: {v!r} must be LINK_A:LINK_B, e.g. left_wrist_yaw_link:torso_link."
+            )
+        out.append((parts[0], parts[1]))
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    """Compute the metrics, write metrics.json and the figures, print a summary."""
+    from ..metrics import compute_series, dumps, summarize
+    from ..trajectory import RobotTrajectory
+
+    out = Path(args.output)
+    pairs = _pairs(args.pairs)
+    traj = RobotTrajectory.load(args.run)
+    series = compute_series(traj, pairs=pairs, safety_distance=args.safety_distance)
+    metrics = summarize(series, per_frame=not args.no_per_frame)
+    before = None
+    if args.before:
+        btraj = RobotTrajectory.load(args.before)
+        same_pairs = pairs or [tuple(p.split("/")) for p in series.pair_names] or None
+        before = compute_series(btraj, pairs=same_pairs, safety_distance=series.safety_distance)
+        bm = summarize(before, per_frame=False)
+        metrics["before"] = {
+            "run": str(args.before),
+            "joint_limits": bm["joint_limits"],
+            "self_collision": {k: v for k, v in bm["self_collision"].items() if k != "pairs"},
+            "violations": bm["violations"],
+            "power": bm["power"],
+            "tracking_rmse_mean_m": bm["tracking_rmse_mean_m"],
+        }
+        metrics["before_per_frame"] = {
+            "joint_limit_violations": [int(x) for x in before.joint_violations_per_frame],
+            "self_collision_violations": [int(x) for x in before.collision_violations_per_frame],
+        }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "metrics.json").write_text(dumps(metrics), encoding="utf-8")
+    written = [out / "metrics.json"]
+    if not args.no_figures:
+        from ..plots import write_figures
+
+        written += list(write_figures(series, out, before=before, joints=args.joints).values())
+    _print_summary(metrics)
+    print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def _print_summary(m: dict) -> None:
+    """Print the headline numbers of ``metrics.json``."""
+
+    def fmt(x: float | None, scale: float = 1.0, unit: str = "", spec: str = ".2f") -> str:
+        return "-" if x is None else f"{x * scale:{spec}} {unit}".strip()
+
+    def mm(x: float | None) -> str:
+        return fmt(x, 1e3, "mm", ".1f")
+
+    def ms(x: float | None) -> str:
+        return fmt(x, unit="ms", spec=".3f")
+
+    run, jl, sc = m["run"], m["joint_limits"], m["self_collision"]
+    sup, pw, st, mo = m["support"], m["power"], m["solve_time"], m["joint_motion"]
+    tracking = ", ".join(f"{k} {mm(v['rmse_m'])}" for k, v in m["tracking"].items())
+    slip = ", ".join(f"{f} {mm(v['max_slip_m'])}" for f, v in m["foot_slip"].items())
+    velocity = fmt(mo["velocity_peak_rad_s"]["value"], unit="rad/s")
+    jerk = fmt(mo["jerk_peak_rad_s3"]["value"], unit="rad/s^3", spec=".3g")
+    lines = [
+        f"run              {run['robot']}, {run['samples']} samples, "
+        f"{fmt(run['duration_s'], unit='s')}",
+        f"tracking RMSE    mean {mm(m['tracking_rmse_mean_m'])}  {tracking}",
+        f"joint limits     {jl['total_violations']} violations in "
+        f"{jl['frames_with_violation']} frames (max {fmt(jl['max_violation_rad'], unit='rad')})",
+        f"self-collision   {sc['total_violations']} violations in "
+        f"{sc['frames_with_violation']} frames, min distance {mm(sc['min_distance_m'])} over "
+        f"{len(sc['pairs'])} pairs",
+        f"CoM margin       min {mm(sup['min_com_margin_m'])}"
+        + (" (no contact data: every foot assumed in support)" if sup["contacts_assumed"] else ""),
+        f"foot slip        {slip}",
+        f"peaks            velocity {velocity}, jerk {jerk}",
+        f"power            {fmt(pw['mean_abs_power_W'], unit='W')} average absolute "
+        f"(CRAC eq. 43, torques: {pw['source']})",
+        f"solve time       median {ms(st['median_ms'])}, p95 {ms(st['p95_ms'])}, "
+        f"max {ms(st['max_ms'])}",
+    ]
+    if "before" in m:
+        b = m["before"]
+        lines.append(
+            f"before           {b['violations']['total_per_frame_mean']:.2f} violations per "
+            f"frame ({b['joint_limits']['total_violations']} joint-limit, "
+            f"{b['self_collision']['total_violations']} self-collision)"
+        )
+    print("\n".join(lines))
