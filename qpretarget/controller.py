@@ -196,6 +196,13 @@ class Controller:
             self.tasks[task.name] = task
         if not self.tasks:
             raise ConfigError("no task: list at least one under `tasks:`.", path="tasks")
+        m = sum(t.dim for t in self.tasks.values())
+        self._J_all = np.zeros((m, self.robot.nv))
+        self._v_all = np.zeros(m)
+        i = 0
+        for t in self.tasks.values():
+            t.attach_buffers(self._J_all[i : i + t.dim], self._v_all[i : i + t.dim])
+            i += t.dim
 
         # Constraints.
         cons_spec = cfg.get("constraints") or []
@@ -477,6 +484,8 @@ class Controller:
             W,
             self.regularization.damping,
             self.tick,
+            self._J_all,
+            self._v_all,
         )
 
     def step(

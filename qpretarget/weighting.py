@@ -40,6 +40,7 @@ class Regularization(abc.ABC):
         """Prepare buffers; ``controller`` gives access to constraint modules (collisions)."""
         self.robot = robot
         self._eye = np.eye(robot.nv)
+        self._eye.setflags(write=False)
 
     def reset(self, state: RobotState) -> None:
         """Forget history."""

@@ -34,6 +34,10 @@ class Augmentation(Strategy):
         self._problem = QPProblem(robot.nv, n_rows)
         self._solver = solver_factory()
         self._sqrt_cache = [(None, None)] * len(task_dims)
+        self._w_seen: list = []
+        self._W_seen = None
+        self._W_is_eye = False
+        self._sw_all = np.zeros(m)
 
     def reset(self) -> None:
         self._solver.reset()
@@ -44,21 +48,47 @@ class Augmentation(Strategy):
     def assemble(self, tp: TickProblem) -> QPProblem:
         """Fill the QP of this tick (exposed for tests and solver comparisons)."""
         Jw, rw, p = self._Jw, self._rw, self._problem
-        i = 0
-        cache = self._sqrt_cache
-        for j, b in enumerate(tp.blocks):
-            k = b.J.shape[0]
-            w, sw = cache[j]
-            if b.weight is not w:  # weights rarely change: reuse their square root
-                sw = np.sqrt(b.weight)
-                cache[j] = (b.weight, sw)
-            np.multiply(b.J, sw[:, None], out=Jw[i : i + k])
-            np.multiply(b.v_star, sw, out=rw[i : i + k])
-            i += k
+        blocks = tp.blocks
+        J_all, v_all = tp.J_all, tp.v_all
+        if (
+            J_all is not None
+            and J_all.shape == Jw.shape
+            and all(b.J.base is J_all and b.v_star.base is v_all for b in blocks)
+        ):
+            # Fast path: all rows already stacked; weight them with two products.
+            weights = [b.weight for b in blocks]
+            if len(weights) != len(self._w_seen) or any(
+                w is not s for w, s in zip(weights, self._w_seen)
+            ):
+                self._sw_all = np.sqrt(np.concatenate(weights))
+                self._w_seen = weights
+            sw = self._sw_all
+            np.multiply(tp.J_all, sw[:, None], out=Jw)
+            np.multiply(tp.v_all, sw, out=rw)
+        else:
+            i = 0
+            cache = self._sqrt_cache
+            for j, b in enumerate(blocks):
+                k = b.J.shape[0]
+                w, sw = cache[j]
+                if b.weight is not w:  # weights rarely change: reuse their square root
+                    sw = np.sqrt(b.weight)
+                    cache[j] = (b.weight, sw)
+                np.multiply(b.J, sw[:, None], out=Jw[i : i + k])
+                np.multiply(b.v_star, sw, out=rw[i : i + k])
+                i += k
         np.matmul(Jw.T, Jw, out=p.H)
         lam2 = tp.damping * tp.damping
         if lam2 > 0:
-            p.H += lam2 * tp.W
+            W = tp.W
+            if W is not self._W_seen:
+                # A read-only W cannot change in place: test once whether it is the identity.
+                self._W_seen = W
+                self._W_is_eye = not W.flags.writeable and np.array_equal(W, np.eye(len(W)))
+            if self._W_is_eye:
+                p.H.flat[:: p.n + 1] += lam2
+            else:
+                p.H += lam2 * W
         np.matmul(Jw.T, rw, out=p.g)
         np.negative(p.g, out=p.g)
         if p.n_in:

@@ -33,6 +33,8 @@ class TickProblem:
         lb, ub: merged box bounds on the variable.
         W: regularization metric (nv, nv); damping: its lambda.
         tick: tick counter.
+        J_all, v_all: when set, every block's ``J`` / ``v_star`` are consecutive rows of these
+            stacked buffers (in block order), so a strategy may use them in one product.
     """
 
     state: RobotState
@@ -46,6 +48,8 @@ class TickProblem:
     W: np.ndarray
     damping: float
     tick: int
+    J_all: np.ndarray | None = None
+    v_all: np.ndarray | None = None
 
 
 @dataclass(slots=True)

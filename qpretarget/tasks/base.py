@@ -92,6 +92,8 @@ class Task(abc.ABC):
         self.weight = np.zeros(0)
         self._ff = None  # target velocity estimate (k,)
         self.robot: RobotModel | None = None
+        self._Jbuf: np.ndarray | None = None  # rows of the controller's stacked buffers
+        self._vbuf: np.ndarray | None = None
 
     # ------------------------------------------------------------------ lifecycle
     def bind(self, robot: RobotModel, *, path: str = "") -> None:
@@ -100,6 +102,17 @@ class Task(abc.ABC):
         self.weight = weight_vector(
             self._weight_spec, self.dim, f"{path}.weight" if path else "weight"
         )
+
+    def attach_buffers(self, J: np.ndarray, v_star: np.ndarray) -> None:
+        """Write this task's rows into ``J`` (dim, nv) and ``v_star`` (dim,) every tick.
+
+        The controller stacks every task's rows in one buffer so a strategy can weight them all
+        with one product; the returned :class:`CostBlock` then holds views of those rows, valid
+        until the next tick.
+        """
+        if J.shape != (self.dim, J.shape[1]) or v_star.shape != (self.dim,):
+            raise ValueError(f"task {self.name!r}: buffers of shape {J.shape}, {v_star.shape}")
+        self._Jbuf, self._vbuf = J, v_star
 
     def reset(self, state: RobotState) -> None:
         """Set the target to the current value (zero error) and forget history."""
@@ -142,9 +155,16 @@ class Task(abc.ABC):
         e = self.compute_error(state)
         J = self.compute_jacobian(state)
         gain = self.gain
-        v_star = e * (1.0 / dt if gain is None or gain * dt > 1.0 else gain)
+        k = 1.0 / dt if gain is None or gain * dt > 1.0 else gain
+        if self._Jbuf is not None:
+            np.copyto(self._Jbuf, J)
+            J = self._Jbuf
+            v_star = self._vbuf
+            np.multiply(e, k, out=v_star)
+        else:
+            v_star = e * k
         if self.feedforward and self._ff is not None:
-            v_star = v_star + self._ff
+            v_star += self._ff
         w = self.weight
         if self.presence < 1.0:
             w = w * self.presence
