@@ -58,7 +58,7 @@ class Augmentation(Strategy):
             # Fast path: all rows already stacked; weight them with two products.
             weights = [b.weight for b in blocks]
             if len(weights) != len(self._w_seen) or any(
-                w is not s for w, s in zip(weights, self._w_seen)
+                w is not s for w, s in zip(weights, self._w_seen, strict=True)
             ):
                 self._sw_all = np.sqrt(np.concatenate(weights))
                 self._w_seen = weights
