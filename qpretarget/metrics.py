@@ -442,46 +442,32 @@ def collision_model_for(
 ) -> tuple[LinkPairDistances | None, float]:
     """The pair-distance model and safety distance [m] to evaluate a run with.
 
-    Pairs come from, in order: ``pairs``; the run's self-collision constraint (its pairs and
-    safety distance); :data:`DEFAULT_PAIRS` for the robot. ``None`` when there is none.
+    Pairs come from, in order: ``pairs``; the run's ``self_collision`` constraint (its pairs,
+    geometry and safety distance ``d_s``); :data:`DEFAULT_PAIRS` for the robot. ``None`` when
+    there is none.
     """
     safety = DEFAULT_SAFETY_DISTANCE
-    constraint = None
-    if controller is not None:
-        for c in getattr(controller, "constraints", []):
-            if getattr(c, "type_name", "") == "self_collision":
-                constraint = c
-                break
+    geometry = "convex_hull"
+    constraint = next(
+        (
+            c
+            for c in getattr(controller, "constraints", [])
+            if getattr(c, "type_name", "") == "self_collision"
+        ),
+        None,
+    )
     if constraint is not None:
-        for attr in ("safety_distance", "d_s", "ds"):
-            value = getattr(constraint, attr, None)
-            if isinstance(value, (int, float)):
-                safety = float(value)
-                break
+        value = getattr(constraint, "safety_distance", None)
+        if isinstance(value, (int, float)):
+            safety = float(value)
+        geometry = str(getattr(constraint, "geometry", geometry))
         if pairs is None:
-            pairs = _constraint_pairs(constraint)
+            pairs = [(str(a), str(b)) for a, b in getattr(constraint, "pairs", [])] or None
     if pairs is None:
         pairs = DEFAULT_PAIRS.get(robot.name)
     if not pairs:
         return None, safety
-    return LinkPairDistances(robot, [(str(a), str(b)) for a, b in pairs]), safety
-
-
-def _constraint_pairs(constraint: Any) -> list[tuple[str, str]] | None:
-    """Link-name pairs of a self-collision constraint module, if it exposes them."""
-    for attr in ("pair_links", "link_pairs", "pairs"):
-        value = getattr(constraint, attr, None)
-        if value is None:
-            continue
-        out = []
-        for p in value:
-            if isinstance(p, (tuple, list)) and len(p) == 2 and all(isinstance(x, str) for x in p):
-                out.append((p[0], p[1]))
-            elif hasattr(p, "link_a") and hasattr(p, "link_b"):
-                out.append((p.link_a, p.link_b))
-        if out:
-            return out
-    return None
+    return LinkPairDistances(robot, [(str(a), str(b)) for a, b in pairs], geometry=geometry), safety
 
 
 # ---------------------------------------------------------------------------------- series
@@ -836,13 +822,26 @@ def _peak(values: np.ndarray, names: Sequence[str]) -> dict[str, Any]:
     return {"value": _f(values[j]), "joint": names[j]}
 
 
+#: Number of pairs whose distance over time goes into ``per_frame`` (the closest ones).
+PER_FRAME_PAIRS = 16
+
+
+def _closest_pairs(s: MetricSeries, n: int = PER_FRAME_PAIRS) -> list[int]:
+    """Indices of the ``n`` pairs that come closest, in pair order."""
+    if s.pair_distance.size == 0:
+        return []
+    mins = np.nanmin(np.where(np.isfinite(s.pair_distance), s.pair_distance, np.inf), axis=0)
+    return sorted(np.argsort(mins, kind="stable")[:n].tolist())
+
+
 def summarize(series: MetricSeries, *, per_frame: bool = True) -> dict[str, Any]:
     """JSON-serializable summary of a run's metrics (the content of ``metrics.json``).
 
     Args:
         series: from :func:`compute_series`.
-        per_frame: include the per-frame arrays (violation counts, pair distances, CoM margin,
-            foot slip, power) under ``"per_frame"``.
+        per_frame: include the per-frame arrays (violation counts, distances of the
+            :data:`PER_FRAME_PAIRS` closest pairs, CoM margin, foot slip, power) under
+            ``"per_frame"``.
 
     Returns:
         A dict of plain Python types; units are in the key names (``_m``, ``_rad``, ``_W``...).
@@ -995,7 +994,7 @@ def summarize(series: MetricSeries, *, per_frame: bool = True) -> dict[str, Any]
             "self_collision_violations": _list(col),
             "below_safety": _list(below),
             "pair_distance_m": {
-                n: _list(s.pair_distance[:, p]) for p, n in enumerate(s.pair_names)
+                s.pair_names[p]: _list(s.pair_distance[:, p]) for p in _closest_pairs(s)
             },
             "com_margin_m": _list(cm),
             "foot_slip_m": {f: _list(s.foot_slip[f]) for f in s.foot_names},

@@ -433,8 +433,9 @@ class Comparison:
         m = self.machine
         lines = [
             f"Config `{self.config}`, motion: {self.motion}; reference solver: {self.reference}.",
-            f"Machine: {m.get('cpu', '?')}, {m.get('cores', '?')} cores, "
-            f"Python {m.get('python', '?')}, {m.get('versions', '')}.",
+            f"Machine: {m.get('cpu', '?')}, {m.get('cores', '?')} cores (load average "
+            f"{m.get('load_average', '?')} at the start), Python {m.get('python', '?')}, "
+            f"{m.get('versions', '')}.",
             "",
             self.to_markdown(),
             "",
@@ -466,9 +467,14 @@ def _machine() -> dict[str, str]:
                     break
     except OSError:
         pass
+    try:
+        load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    except OSError:  # pragma: no cover - not on every platform
+        load = "?"
     return {
         "cpu": cpu,
         "cores": str(os.cpu_count()),
+        "load_average": load,
         "python": platform.python_version(),
         "versions": ", ".join(versions),
     }
@@ -626,6 +632,7 @@ def compare_solvers(
         base_dir, label = path.parent, str(path)
     Controller(cfg, base_dir=base_dir)  # validate the config once, before any long run
     mot = motion if isinstance(motion, Motion) else load_targets(motion, seconds=seconds)
+    machine = _machine()  # before the runs: the load average of the machine as they start
     names = list(solvers) if solvers else available_solver_names()
     rows: list[SolverRow] = []
     trajs: dict[str, RobotTrajectory] = {}
@@ -654,7 +661,7 @@ def compare_solvers(
             k = int(rt.meta.get("root_nq", 0))
             dq = tr.q[:, k:] - rt.q[:, k:]
             r.max_joint_dev_rad = float(np.max(np.abs(dq))) if dq.size else 0.0
-    return Comparison(label, mot.source, ref, rows, _machine())
+    return Comparison(label, mot.source, ref, rows, machine)
 
 
 __all__ = [
