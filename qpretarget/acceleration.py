@@ -188,6 +188,10 @@ class AccelerationLevel:
         self._l = np.empty(n_rows)
         self._u = np.empty(n_rows)
         self._prev_vd: dict[str, np.ndarray] = {}
+        m = sum(t.dim for t in self._tasks)
+        #: Stacked acceleration references of every task, in task order (m,).
+        self.a_all = np.zeros(m)
+        self._vg_all = np.zeros(m)  # velocity references with ``velocity_gain``
         self.alpha = np.zeros(nv)
         self.alpha_c = np.zeros(nv)
         self.qdot_c = np.zeros(nv)
@@ -241,20 +245,30 @@ class AccelerationLevel:
 
         :math:`v_{d,i}` is the task's feed-forward velocity (its ``v_star`` minus :math:`K e`,
         non-zero only with ``feedforward: true``); :math:`a_{d,i}` its finite difference over
-        the ticks.
+        the ticks. The references are rows of one stacked buffer (:attr:`a_all`), like the
+        velocity level's, so strategies can weight them in one product.
         """
         g, v, dt = self.gains, tp.state.v, tp.dt
+        a_all = self.a_all
         blocks = []
+        i = 0
         for t, b, jdv in zip(self._tasks, tp.blocks, drifts, strict=True):
-            a_star = g.kp * b.error - g.kv * (b.J @ v)  # K_v (v_d - J v) + K_p e with v_d = 0
+            seg = a_all[i : i + t.dim]
+            np.multiply(b.error, g.kp, out=seg)  # K_p e
+            seg -= jdv
             if t.feedforward:
                 vd = b.v_star - t.effective_gain(dt) * b.error
                 prev = self._prev_vd.get(t.name)
-                a_star += g.kv * vd
+                seg += g.kv * vd
                 if prev is not None:
-                    a_star += (vd - prev) / dt
+                    seg += (vd - prev) / dt  # a_d
                 self._prev_vd[t.name] = vd
-            blocks.append(CostBlock(b.task, b.J, a_star - jdv, b.weight, b.level, b.error))
+            if tp.J_all is None:
+                seg -= g.kv * (b.J @ v)
+            blocks.append(CostBlock(b.task, b.J, seg, b.weight, b.level, b.error))
+            i += t.dim
+        if tp.J_all is not None:
+            a_all -= g.kv * (tp.J_all @ v)  # - K_v J v for every task in one product
         return blocks
 
     def _velocity_blocks(self, tp: TickProblem) -> list[CostBlock]:
@@ -263,17 +277,14 @@ class AccelerationLevel:
         if K is None:
             return tp.blocks
         Kc = min(K, 1.0 / tp.dt)
-        return [
-            CostBlock(
-                b.task,
-                b.J,
-                b.v_star + (Kc - t.effective_gain(tp.dt)) * b.error,
-                b.weight,
-                b.level,
-                b.error,
-            )
-            for t, b in zip(self._tasks, tp.blocks, strict=True)
-        ]
+        out, i = [], 0
+        for t, b in zip(self._tasks, tp.blocks, strict=True):
+            seg = self._vg_all[i : i + t.dim]
+            np.multiply(b.error, Kc - t.effective_gain(tp.dt), out=seg)
+            seg += b.v_star
+            out.append(CostBlock(b.task, b.J, seg, b.weight, b.level, b.error))
+            i += t.dim
+        return out
 
     def _solve_velocity(
         self, tp: TickProblem
@@ -302,7 +313,7 @@ class AccelerationLevel:
         Raises:
             TargetError: on an unknown task name, a malformed target or an invalid ``dt``.
         """
-        from .controller import StepResult
+        from .controller import StepResult, TaskErrors
 
         ctrl = self.ctrl
         t0 = time.perf_counter()
@@ -329,8 +340,9 @@ class AccelerationLevel:
         #    relaxed here, once per tick, by the controller's fallback (when installed).
         blocks_v = self._velocity_blocks(tp)
         tp_v = TickProblem(
-            state, dt, blocks_v, tp.C, tp.l, tp.u, tp.lb, tp.ub, tp.W, tp.damping, tp.tick
-        )
+            state, dt, blocks_v, tp.C, tp.l, tp.u, tp.lb, tp.ub, tp.W, tp.damping, tp.tick,
+            tp.J_all, tp.v_all if blocks_v is tp.blocks else self._vg_all,
+        )  # fmt: skip
         qdot_c, res_v, rel_v = self._solve_velocity(tp_v)
         relaxed.update(rel_v or {})
         if rel_v is not None:
@@ -380,7 +392,7 @@ class AccelerationLevel:
             blocks_a = self.acceleration_blocks(tp, drifts)
             tp_a = TickProblem(
                 state, dt, blocks_a, tp.C, self._l, self._u, self._lb, self._ub, tp.W,
-                tp.damping, tp.tick,
+                tp.damping, tp.tick, tp.J_all, self.a_all,
             )  # fmt: skip
             build_time += time.perf_counter() - tb
             res_a = ctrl.strategy.solve(tp_a)
@@ -402,7 +414,7 @@ class AccelerationLevel:
         # 3. Torques (CRAC eq. 30) and semi-implicit integration.
         tau = pin.rnea(self.model, self._dyn_data, q, v, alpha_c).copy()
         q_next = pin.integrate(self.model, q, v_next * dt)
-        errors = {b.task: ctrl.tasks[b.task].error_norm(b.error) for b in tp.blocks}
+        errors = TaskErrors(tp.blocks, ctrl.tasks)
         for con in ctrl.constraints:
             con.after_step(state, v_next, dt)
         self.alpha, self.alpha_c, self.qdot_c = alpha, alpha_c, qdot_c
