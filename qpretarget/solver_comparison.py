@@ -29,7 +29,7 @@ import os
 import platform
 import sys
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -150,19 +150,19 @@ def targets_from_run(traj: RobotTrajectory, controller: Controller) -> list[dict
 
 @dataclass
 class Motion:
-    """Targets for a comparison, with where they came from.
+    """A motion for a comparison, with where it came from.
 
     Attributes:
         kind: ``scripted``, ``run`` or ``mocap``.
         source: text naming the source.
-        make: ``make(controller) -> list of target mappings`` (one per tick).
-        dt: tick length [s] to run at (``None``: the controller's).
+        run: ``run(controller) -> RobotTrajectory``: the controller (reset first) over the motion.
+        initial_sample: the trajectory's sample 0 is the state before the first tick (not a tick).
     """
 
     kind: str
     source: str
-    make: Any
-    dt: float | None = None
+    run: Callable[[Controller], RobotTrajectory]
+    initial_sample: bool = True
 
 
 def load_targets(motion: str | Path, *, seconds: float | None = None) -> Motion:
@@ -199,7 +199,11 @@ def load_targets(motion: str | Path, *, seconds: float | None = None) -> Motion:
             keep = traj.t - traj.t[0] <= seconds + 1e-9
             traj.t = traj.t[keep]
             traj.targets = {k: v[keep] for k, v in traj.targets.items()}
-        return Motion("run", str(path), lambda c: targets_from_run(traj, c), dt=traj.dt or None)
+        return Motion(
+            "run",
+            f"targets of {path}",
+            lambda c: record_run(c, targets_from_run(traj, c), dt=traj.dt or None),
+        )
     if path.suffix.lower() in MOCAP_SUFFIXES:
         return _mocap_motion(path, seconds)
     raise ComparisonError(
@@ -209,19 +213,24 @@ def load_targets(motion: str | Path, *, seconds: float | None = None) -> Motion:
 
 
 def _mocap_motion(path: Path, seconds: float | None) -> Motion:
-    """Targets from a mocap file through the motion pipeline's retargeter, when it exists."""
+    """A mocap clip, retargeted for each solver by the config's ``retarget:`` section."""
     try:
-        from . import retarget  # type: ignore[attr-defined]  # noqa: F401
+        from .motion import load_motion
+        from .retarget import Retargeter
     except ImportError:
         raise ComparisonError(
             f"{path.name}: reading mocap needs the motion pipeline's retargeter "
-            "(qpretarget.retarget), which this installation does not have yet. Retarget the clip "
+            "(qpretarget.retarget), which this installation does not have. Retarget the clip "
             "to a run file first, or use 'scripted'."
         ) from None
-    raise ComparisonError(  # pragma: no cover - filled in when the retargeter lands
-        f"{path.name}: mocap input is not wired to compare-solvers yet; retarget it to a run file "
-        "first."
-    )
+    human = load_motion(path)
+
+    def run(controller: Controller) -> RobotTrajectory:
+        controller.reset()
+        return Retargeter(controller).retarget(human, end=seconds)
+
+    span = f", first {seconds:g} s" if seconds is not None else ""
+    return Motion("mocap", f"{path.name}{span}", run, initial_sample=False)
 
 
 # ---------------------------------------------------------------------------------- recording
@@ -328,7 +337,7 @@ class SolverRow:
     median_solve_ms: float | None = None
     p95_solve_ms: float | None = None
     max_solve_ms: float | None = None
-    median_iterations: float | None = None
+    median_iterations: float | None = None  # per QP solve
     max_violation: float | None = None
     tracking_rmse_mm: float | None = None
     rmse_diff_mm: float | None = None
@@ -367,7 +376,7 @@ class Comparison:
         ("failures", "failures", "{}"),
         ("median_solve_ms", "median solve [ms]", "{:.3f}"),
         ("p95_solve_ms", "p95 solve [ms]", "{:.3f}"),
-        ("median_iterations", "iterations (median)", "{:g}"),
+        ("median_iterations", "iterations per QP (median)", "{:g}"),
         ("max_violation", "max violation", "{:.1e}"),
         ("tracking_rmse_mm", "tracking RMSE [mm]", "{:.3f}"),
         ("rmse_diff_mm", "RMSE diff to ref [mm]", "{:.2e}"),
@@ -545,7 +554,7 @@ def _run_one(
     cfg["solver"] = _solver_spec(name, config)
     controller = Controller(cfg, base_dir=base_dir)
     solvers = controller.strategy.solvers()
-    records: list[tuple[float, int, bool]] = []
+    records: list[tuple[float, int, bool]] = []  # per QP solve: violation, iterations, success
     for s in solvers:
         original = s.solve
 
@@ -556,31 +565,24 @@ def _run_one(
             return sol
 
         s.solve = solve  # type: ignore[method-assign]
-    targets = motion.make(controller)
-    per_tick_iters: list[int] = []
-    mark = [0]
-
-    def on_step(res: Any) -> None:
-        new = records[mark[0] :]
-        mark[0] = len(records)
-        its = [r[1] for r in new]
-        per_tick_iters.append(-1 if any(i < 0 for i in its) or not its else int(sum(its)))
-
     t0 = time.perf_counter()
     with _quiet_c_stdout(name != DEFAULT_REFERENCE):
-        traj = record_run(controller, targets, dt=motion.dt, on_step=on_step)
+        traj = motion.run(controller)
     wall = time.perf_counter() - t0
-    solve_ms = np.asarray(traj.solve_time[1:]) * 1e3
+    first = 1 if motion.initial_sample else 0
+    solve_ms = np.asarray(traj.solve_time[first:]) * 1e3
+    status = np.asarray(traj.status[first:]).astype(str)
     viols = np.array([r[0] for r in records]) if records else np.zeros(0)
-    its = np.array([i for i in per_tick_iters if i >= 0])
-    held = int(np.sum(traj.status[1:] == "held"))
+    iters = [r[1] for r in records]
+    its = np.array(iters) if iters and min(iters) >= 0 else np.zeros(0)
+    held = int(np.sum(status == "held"))
     failures = int(sum(1 for r in records if not r[2]))
-    rmses = [rmse(traj.targets[n], traj.actual[n]) for n in traj.targets]
+    rmses = [rmse(v, traj.actual[n]) for n, v in traj.targets.items() if n in traj.actual]
     settings = solvers[0].settings_summary() if solvers else {}
     row = SolverRow(
         solver=name,
         status="ok" if failures == 0 and held == 0 else "failures",
-        ticks=len(traj.t) - 1,
+        ticks=len(traj.t) - first,
         qp_solves=len(records),
         failures=failures,
         held_ticks=held,
