@@ -397,3 +397,16 @@ def test_conflicting_rows_relax_through_the_fallback() -> None:
     assert np.all(np.isfinite(res.tau))
     # the knee still moves back towards its range, as fast as the frozen legs allow
     assert res.v[robot.joint_v_index[robot.joint_index("left_knee_joint")]] > 0.0
+
+
+def test_doc_yaml_runs() -> None:
+    """The YAML of docs/schemes/acceleration.md builds and runs (doc snippets must not rot)."""
+    doc = (CONFIGS.parent / "docs" / "schemes" / "acceleration.md").read_text()
+    snippet = doc.split("```yaml\n", 1)[1].split("```", 1)[0]
+    ctrl = Controller(yaml.safe_load(snippet))
+    assert isinstance(ctrl._level_impl, AccelerationLevel)
+    assert ctrl._level_impl.gains.kv == pytest.approx(KV)
+    p = ctrl.task("right_wrist").position_target + [0.01, 0.0, 0.0]
+    for _ in range(3):
+        res = ctrl.step({"right_wrist": p})
+    assert res.status == "ok" and res.tau.shape == (ctrl.robot.nv,)
