@@ -223,9 +223,10 @@ class AccelerationLevel:
             self._fd_state.update(pin.integrate(model, q, v * h), v)
             for i, (t, kind) in enumerate(zip(self._tasks, self._drift_kind, strict=True)):
                 if kind == "fd":
-                    fd_J[i] = (
-                        (t.compute_jacobian(self._fd_state) - t.compute_jacobian(state)) @ v / h
-                    )
+                    # Copy first: a task may return one internal buffer; evaluate at ``state``
+                    # last so such a buffer ends up holding this tick's Jacobian.
+                    J_h = t.compute_jacobian(self._fd_state).copy()
+                    fd_J[i] = (J_h - t.compute_jacobian(state)) @ v / h
         for i, (t, kind) in enumerate(zip(self._tasks, self._drift_kind, strict=True)):
             if kind == "zero":
                 out.append(np.zeros(t.dim))
