@@ -334,7 +334,10 @@ class AccelerationLevel:
         tp = ctrl.build_tick(dt)
         tp.damping = self.damping
         relaxed = dict(getattr(ctrl, "_bound_gave", {}))
+        td = time.perf_counter()
         drifts = self.compute_drifts(state)
+        timings = ctrl.last_timings  # per-stage seconds, read by ``qpretarget bench``
+        timings["drift"] = time.perf_counter() - td
         build_time = time.perf_counter() - tb
 
         # 1. Velocity-level reference qdot_c (CRAC eq. 16 / 41). Conflicting hard constraints are
@@ -344,7 +347,9 @@ class AccelerationLevel:
             state, dt, blocks_v, tp.C, tp.l, tp.u, tp.lb, tp.ub, tp.W, tp.damping, tp.tick,
             tp.J_all, tp.v_all if blocks_v is tp.blocks else self._vg_all,
         )  # fmt: skip
+        tv = time.perf_counter()
         qdot_c, res_v, rel_v = self._solve_velocity(tp_v)
+        timings["velocity_qp"] = time.perf_counter() - tv
         relaxed.update(rel_v or {})
         if rel_v is not None:
             messages.append(
@@ -396,7 +401,9 @@ class AccelerationLevel:
                 tp.damping, tp.tick, tp.J_all, self.a_all,
             )  # fmt: skip
             build_time += time.perf_counter() - tb
+            tq = time.perf_counter()
             res_a = ctrl.strategy.solve(tp_a)
+            timings["acceleration_qp"] = time.perf_counter() - tq
             ok = res_a.success and res_a.x is not None and np.all(np.isfinite(res_a.x))
             if ok:
                 alpha = res_a.x
@@ -413,21 +420,25 @@ class AccelerationLevel:
         alpha_c = (v_next - v) * inv_dt
 
         # 3. Torques (CRAC eq. 30) and semi-implicit integration.
+        tr = time.perf_counter()
         tau = pin.rnea(self.model, self._dyn_data, q, v, alpha_c).copy()
+        timings["dynamics"] = time.perf_counter() - tr
         q_next = pin.integrate(self.model, q, v_next * dt)
         errors = TaskErrors(tp.blocks, ctrl.tasks)
         for con in ctrl.constraints:
             con.after_step(state, v_next, dt)
         self.alpha, self.alpha_c, self.qdot_c = alpha, alpha_c, qdot_c
         ctrl.v = v_next
+        tk = time.perf_counter()
         state.update(q_next, v_next)
+        timings["kinematics"] = time.perf_counter() - tk
         ctrl.t += dt
         q_out = q_next.copy()
         q_out.setflags(write=False)
         v_out = v_next.copy()
         v_out.setflags(write=False)
         tau.setflags(write=False)
-        return StepResult(
+        result = StepResult(
             q=q_out,
             v=v_out,
             tick=ctrl.tick,
@@ -443,6 +454,10 @@ class AccelerationLevel:
             messages=messages,
             tau=tau,
         )
+        # Controller.step returns this result directly: notify its observers here.
+        if ctrl._observers:
+            ctrl._notify(result)
+        return result
 
     def __repr__(self) -> str:
         g = self.gains

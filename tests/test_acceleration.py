@@ -410,3 +410,16 @@ def test_doc_yaml_runs() -> None:
     for _ in range(3):
         res = ctrl.step({"right_wrist": p})
     assert res.status == "ok" and res.tau.shape == (ctrl.robot.nv,)
+
+
+def test_observers_and_stage_timings(g1_acc: Controller) -> None:
+    seen = []
+    g1_acc.add_observer(seen.append)
+    try:
+        g1_acc.reset()
+        res = g1_acc.step({})
+    finally:
+        g1_acc.remove_observer(seen.append)
+    assert seen == [res] and seen[0].tau is not None
+    for stage in ("drift", "velocity_qp", "acceleration_qp", "dynamics", "kinematics"):
+        assert g1_acc.last_timings[stage] >= 0.0
