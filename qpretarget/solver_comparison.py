@@ -185,7 +185,9 @@ def load_targets(motion: str | Path, *, seconds: float | None = None) -> Motion:
         if not dur > 0:
             raise ComparisonError(f"the scripted motion needs a positive duration, got {dur}.")
         return Motion(
-            "scripted", f"scripted targets ({dur:g} s)", lambda c: list(scripted_targets(c, dur))
+            "scripted",
+            f"scripted targets ({dur:g} s)",
+            lambda c: record_run(c, list(scripted_targets(c, dur))),
         )
     path = Path(text)
     if not path.is_file():
