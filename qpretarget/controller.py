@@ -255,6 +255,8 @@ class Controller:
         self._lb = np.empty(self.robot.nv)
         self._ub = np.empty(self.robot.nv)
         self.state = RobotState(self.robot)
+        #: Called with each StepResult (live viewers, loggers): see :meth:`add_observer`.
+        self._observers: list[Any] = []
         #: Seconds spent in each stage of the last tick (read by ``qpretarget bench``).
         self.last_timings: dict[str, float] = {}
         self.tick = 0
@@ -352,6 +354,30 @@ class Controller:
         q = self.state.q.view()
         q.setflags(write=False)
         return q
+
+    def add_observer(self, fn: Any) -> None:
+        """Call ``fn(step_result)`` after every tick (e.g. a live viewer's publisher).
+
+        Observers must be quick: the viewer's :class:`~qpretarget.viz.viewer.LivePublisher`
+        only stores the latest result and sends it from its own thread. An observer that raises
+        is removed and reported in the next result's messages; it never stops the loop.
+        """
+        if not callable(fn):
+            raise TypeError(f"an observer must be callable, got {type(fn).__name__}")
+        self._observers.append(fn)
+
+    def remove_observer(self, fn: Any) -> None:
+        """Stop calling ``fn``."""
+        if fn in self._observers:
+            self._observers.remove(fn)
+
+    def _notify(self, result: StepResult) -> None:
+        for fn in list(self._observers):
+            try:
+                fn(result)
+            except Exception as exc:  # an observer never kills the control loop
+                self._observers.remove(fn)
+                result.messages.append(f"observer {fn!r} raised {exc!r}; it was removed.")
 
     def task(self, name: str) -> Task:
         """Return task ``name`` (raises with close names)."""
@@ -506,7 +532,10 @@ class Controller:
                 programming error). NaN values are not errors: they are missing data.
         """
         if self._level_impl is not None:
-            return self._level_impl.step(targets, dt=dt)
+            result = self._level_impl.step(targets, dt=dt)
+            if self._observers:
+                self._notify(result)
+            return result
         t0 = time.perf_counter()
         if dt is None:
             dt = self.dt
@@ -566,7 +595,7 @@ class Controller:
         q_out.setflags(write=False)
         v_out = v.copy()
         v_out.setflags(write=False)
-        return StepResult(
+        result = StepResult(
             q=q_out,
             v=v_out,
             tick=self.tick,
@@ -581,6 +610,9 @@ class Controller:
             relaxed=relaxed,
             messages=messages,
         )
+        if self._observers:
+            self._notify(result)
+        return result
 
     def __repr__(self) -> str:
         return (

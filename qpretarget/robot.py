@@ -299,7 +299,7 @@ class RobotModel:
                 self.model,
                 str(self.urdf_path),
                 pin.GeometryType.COLLISION,
-                [str(share_directory())],
+                package_dirs=[str(share_directory())],
             )
             self._geometry_cache["collision"] = (gmodel, gmodel.createData())
         return self._geometry_cache["collision"]

@@ -1,0 +1,366 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Interactive 3D viewer in the browser (viser): replay a run, inspect a config, watch a live loop.
+
+``qpretarget view RUN.npz`` shows the robot (its URDF meshes) replaying the run beside the human
+key-point skeleton, the task targets (red) and reached points (blue), the support polygon and CoM
+ground projection, collision pairs within the influence distance (red lines between witness
+points), a timeline with play/pause and speed, and the numbers of the current frame.
+``qpretarget view CONFIG.yaml`` shows the reference posture with key-point frames, the collision
+geometry the controller uses and its pairs. :class:`LivePublisher` streams a running controller.
+
+viser is an optional dependency (``pip install qpretarget[viz]``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import QPRetargetError
+from ..robot import RobotModel
+from .meshes import load_link_meshes
+from .skeleton import place_beside, skeleton_segments
+
+
+class ViewerError(QPRetargetError, RuntimeError):
+    """The viewer cannot start (missing extra, port taken, bad input)."""
+
+
+def _viser():  # noqa: ANN202
+    try:
+        import viser
+    except ImportError:
+        raise ViewerError(
+            "the viewer needs viser: install the extra with `pip install qpretarget[viz]`."
+        ) from None
+    return viser
+
+
+def port_is_free(host: str, port: int) -> bool:
+    """``True`` when nothing listens on ``host:port``."""
+    with contextlib.closing(socket.socket(socket.AF_INET, socket.SOCK_STREAM)) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError:
+            return False
+    return True
+
+
+def choose_port(host: str, port: int, *, search: bool = True, span: int = 50) -> tuple[int, str]:
+    """Return a free port (``port`` itself if free) and a message for people when it moved.
+
+    ``port=0`` asks the OS for any free port.
+
+    Raises:
+        ViewerError: when ``port`` is taken and ``search`` is off, or no port nearby is free.
+    """
+    if port == 0:
+        with contextlib.closing(socket.socket(socket.AF_INET, socket.SOCK_STREAM)) as s:
+            s.bind((host, 0))
+            return int(s.getsockname()[1]), ""
+    if port_is_free(host, port):
+        return port, ""
+    if not search:
+        raise ViewerError(
+            f"port {port} on {host} is taken (another viewer?). Pass another --port, or --port 0 "
+            "for any free port."
+        )
+    for p in range(port + 1, port + span):
+        if port_is_free(host, p):
+            return p, f"port {port} is taken; using port {p} instead."
+    raise ViewerError(f"ports {port}-{port + span - 1} on {host} are all taken; pass --port 0.")
+
+
+def _wxyz(R: np.ndarray) -> np.ndarray:
+    q = pin.Quaternion(R)
+    return np.array([q.w, q.x, q.y, q.z])
+
+
+class Viewer:
+    """A viser server showing one robot.
+
+    Args:
+        robot: the robot to show.
+        host: interface to listen on (``127.0.0.1``: this machine only).
+        port: port (``0``: any free port); when taken, the next free port is used and said.
+        max_points: vertices per link mesh hull sent to the browser (``None``: full meshes).
+
+    Raises:
+        ViewerError: viser missing, or no free port.
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        search_port: bool = True,
+        max_points: int | None = 600,
+        verbose: bool = True,
+    ) -> None:
+        viser = _viser()
+        self.robot = robot
+        self.host = host
+        self.port, note = choose_port(host, port, search=search_port)
+        if note and verbose:
+            print(f"qpretarget view: {note}")
+        self.server = viser.ViserServer(host=host, port=self.port, verbose=False)
+        self.server.scene.set_up_direction("+z")
+        self.server.initial_camera.position = (2.2, -2.2, 1.5)
+        self.server.initial_camera.look_at = (0.0, 0.0, 0.6)
+        self.server.scene.add_grid("/ground", width=4.0, height=4.0, cell_size=0.25)
+        self.data = robot.model.createData()
+        self.meshes = load_link_meshes(
+            robot, simplify=max_points is not None, max_points=max_points or 0
+        )
+        self._frames = []
+        for i, m in enumerate(self.meshes):
+            fr = self.server.scene.add_frame(f"/robot/{i}", show_axes=False)
+            # URDF greys are very light under viser's lighting: darken them a little
+            color = tuple(int(200 * c) for c in m.color[:3])
+            self.server.scene.add_mesh_simple(
+                f"/robot/{i}/mesh", m.vertices.astype(np.float32), m.faces.astype(np.uint32),
+                color=color, flat_shading=False,
+            )  # fmt: skip
+            self._frames.append(fr)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self.set_configuration(robot.q_reference)
+
+    @property
+    def url(self) -> str:
+        """Address of the page."""
+        return f"http://{self.host}:{self.port}"
+
+    def set_configuration(self, q: np.ndarray) -> None:
+        """Pose the robot meshes at configuration ``q``."""
+        model, data = self.robot.model, self.data
+        pin.forwardKinematics(model, data, q)
+        with self.server.atomic():
+            for fr, m in zip(self._frames, self.meshes, strict=True):
+                M = data.oMi[m.parent_joint] * m.placement
+                fr.position = M.translation
+                fr.wxyz = _wxyz(M.rotation)
+
+    # ------------------------------------------------------------------ run replay
+    def show_run(self, traj: Any, *, series: dict[str, np.ndarray] | None = None) -> None:
+        """Replay a :class:`~qpretarget.trajectory.RobotTrajectory` with a timeline."""
+        robot = self.robot
+        T = len(traj.t)
+        scene, gui = self.server.scene, self.server.gui
+        targets = {k: np.asarray(traj.targets[k]) for k in traj.task_names if k in traj.targets}
+        actual = {k: np.asarray(traj.actual[k]) for k in traj.task_names if k in traj.actual}
+        human: dict[str, np.ndarray] = {}
+        if traj.human:
+            pts = {
+                k: np.asarray(v)
+                for k, v in traj.human.items()
+                if np.ndim(v) == 2 and np.shape(v)[1] == 3
+            }
+            if pts:
+                base = traj.q[0, :2] if robot.free_flyer else np.zeros(2)
+                yaw = 0.0
+                if robot.free_flyer:
+                    R0 = pin.Quaternion(traj.q[0, 3:7]).toRotationMatrix()
+                    yaw = float(np.arctan2(R0[1, 0], R0[0, 0]))
+                human = place_beside(pts, base, yaw)
+        series = series or {}
+        with gui.add_folder("Timeline"):
+            slider = gui.add_slider("Time [s]", min=0, max=max(T - 1, 1), step=1, initial_value=0)
+            play = gui.add_button("Play / pause")
+            speed = gui.add_dropdown("Speed", ("0.25x", "0.5x", "1x", "2x"), initial_value="1x")
+        numbers = gui.add_markdown("")
+        state = {"playing": False}
+
+        @play.on_click
+        def _(_event: Any) -> None:
+            state["playing"] = not state["playing"]
+
+        tgt_handle = act_handle = bones = poly = com = None
+
+        def draw(k: int) -> None:
+            nonlocal tgt_handle, act_handle, bones, poly, com
+            k = int(min(max(k, 0), T - 1))
+            self.set_configuration(traj.q[k])
+            if targets:
+                P = np.array([v[k] for v in targets.values()], dtype=np.float32)
+                A = np.array([v[k] for v in actual.values()], dtype=np.float32) if actual else P
+                tgt_handle = scene.add_point_cloud(
+                    "/targets", P, (230, 40, 40), point_size=0.03, point_shape="circle"
+                )
+                act_handle = scene.add_point_cloud(
+                    "/actual", A, (40, 90, 230), point_size=0.02, point_shape="circle"
+                )
+            if human:
+                segs = skeleton_segments(human, min(k, len(next(iter(human.values()))) - 1))
+                if len(segs):
+                    bones = scene.add_line_segments(
+                        "/human", segs.astype(np.float32), (240, 140, 20), thickness=0.02
+                    )
+            if robot.free_flyer:
+                c = pin.centerOfMass(robot.model, self.data, traj.q[k])
+                com = scene.add_icosphere(
+                    "/com", radius=0.02, color=(30, 160, 60), position=(c[0], c[1], 0.002)
+                )
+                if traj.contacts is not None and traj.contacts.size:
+                    from .render import _support_polygon
+
+                    pin.updateFramePlacements(robot.model, self.data)
+                    hull = _support_polygon(robot, self.data, traj.contacts[k], traj.foot_names)
+                    if len(hull):
+                        ring = np.vstack([hull, hull[:1]])
+                        segs = np.stack(
+                            [
+                                np.c_[ring[:-1], np.full(len(hull), 0.003)],
+                                np.c_[ring[1:], np.full(len(hull), 0.003)],
+                            ],
+                            axis=1,
+                        )
+                        poly = scene.add_line_segments(
+                            "/support", segs.astype(np.float32), (30, 160, 60), thickness=0.008
+                        )
+            lines = [f"**t = {traj.t[k]:.2f} s** (frame {k + 1}/{T})", ""]
+            for name in targets:
+                if name in actual:
+                    e = np.linalg.norm(targets[name][k] - actual[name][k]) * 1e3
+                    lines.append(f"- {name}: {e:.1f} mm")
+            for key, label, scale, unit in (
+                ("min_distance", "min pair distance", 1e3, "mm"),
+                ("com_margin", "CoM margin", 1e3, "mm"),
+            ):
+                if key in series and k < len(series[key]) and np.isfinite(series[key][k]):
+                    lines.append(f"- {label}: {series[key][k] * scale:.1f} {unit}")
+            if traj.status is not None:
+                lines.append(f"- status: {traj.status[k]}")
+            numbers.content = "\n".join(lines)
+
+        @slider.on_update
+        def _(_event: Any) -> None:
+            draw(slider.value)
+
+        def loop() -> None:
+            dt = float(np.median(np.diff(traj.t))) if T > 1 else 0.01
+            last = time.perf_counter()
+            acc = 0.0
+            while not self._stop.is_set():
+                time.sleep(1 / 60)
+                now = time.perf_counter()
+                if state["playing"]:
+                    acc += (now - last) * float(speed.value.rstrip("x"))
+                    steps = int(acc / dt)
+                    if steps:
+                        acc -= steps * dt
+                        slider.value = (slider.value + steps) % T
+                last = now
+
+        draw(0)
+        th = threading.Thread(target=loop, daemon=True, name="qpretarget-viewer-playback")
+        th.start()
+        self._threads.append(th)
+
+    # ------------------------------------------------------------------ config inspection
+    def show_config(self, controller: Any) -> None:
+        """Reference posture, key-point frames, collision geometry and pairs of a controller."""
+        robot = controller.robot
+        self.set_configuration(controller.q)
+        data = self.data
+        pin.updateFramePlacements(robot.model, data)
+        for key, frame in robot.keyframes.items():
+            M = data.oMf[robot.frame_id(frame)]
+            self.server.scene.add_frame(
+                f"/keypoints/{key}", axes_length=0.08, axes_radius=0.004,
+                position=M.translation, wxyz=_wxyz(M.rotation),
+            )  # fmt: skip
+        lines = [f"**{robot.name}** nq={robot.nq} nv={robot.nv}", ""]
+        lines += [f"- task `{n}`: {t!r}" for n, t in controller.tasks.items()]
+        for c in controller.constraints:
+            lines.append(f"- constraint `{c.name}`")
+            show = getattr(c, "show_in_viewer", None)
+            if show is not None:
+                show(self.server.scene, controller.state)
+            for line in getattr(c, "describe", lambda: [])()[:25]:
+                lines.append(f"    - {line}")
+        self.server.gui.add_markdown("\n".join(lines))
+
+    # ------------------------------------------------------------------ live
+    def publisher(self, max_rate: float = 30.0) -> LivePublisher:
+        """An observer for :meth:`Controller.add_observer` that streams each tick (see below)."""
+        return LivePublisher(self, max_rate=max_rate)
+
+    def serve_forever(self) -> None:
+        """Block until Ctrl-C, then shut down cleanly."""
+        try:
+            while not self._stop.is_set():
+                time.sleep(0.2)
+        except KeyboardInterrupt:
+            print("\nqpretarget view: stopping (Ctrl-C).")
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Stop the playback threads and the server."""
+        self._stop.set()
+        for th in self._threads:
+            th.join(timeout=1.0)
+        with contextlib.suppress(Exception):
+            self.server.stop()
+
+    def __enter__(self) -> Viewer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class LivePublisher:
+    """Streams a running controller to a :class:`Viewer` without slowing its loop.
+
+    Calling it (``publisher(result)``, as a controller observer does) only stores the latest
+    configuration under a lock; a background thread sends it to the browser at most ``max_rate``
+    times per second. The loop's cost is a few microseconds per tick whatever the viewer does.
+    """
+
+    def __init__(self, viewer: Viewer, *, max_rate: float = 30.0) -> None:
+        self.viewer = viewer
+        self.period = 1.0 / max_rate
+        self._latest: np.ndarray | None = None
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self.sent = 0
+        self._thread = threading.Thread(target=self._run, daemon=True, name="qpretarget-live")
+        self._thread.start()
+
+    def __call__(self, result: Any) -> None:
+        q = result.q if hasattr(result, "q") else result
+        with self._lock:
+            self._latest = q
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            time.sleep(self.period)
+            with self._lock:
+                q, self._latest = self._latest, None
+            if q is not None:
+                try:
+                    self.viewer.set_configuration(q)
+                    self.sent += 1
+                except Exception:  # the browser side must never kill the controller loop
+                    pass
+
+    def close(self) -> None:
+        """Stop streaming."""
+        self._stop.set()
+        self._thread.join(timeout=1.0)
+
+
+ObserverFn = Callable[[Any], None]
