@@ -532,10 +532,7 @@ class Controller:
                 programming error). NaN values are not errors: they are missing data.
         """
         if self._level_impl is not None:
-            result = self._level_impl.step(targets, dt=dt)
-            if self._observers:
-                self._notify(result)
-            return result
+            return self._level_impl.step(targets, dt=dt)  # notifies observers itself
         t0 = time.perf_counter()
         if dt is None:
             dt = self.dt
