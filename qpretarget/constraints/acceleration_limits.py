@@ -1,0 +1,163 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Joint acceleration limits at velocity level: the online answer to jitter.
+
+.. math:: v_{prev} - a_{max}\, dt \le v \le v_{prev} + a_{max}\, dt
+
+on the actuated one-DoF joints, with :math:`v_{prev}` the velocity applied during the previous
+tick (zero after reset). Bounding the change of the command per tick keeps the output smooth
+without filtering it afterwards (a filter adds lag and can break the other constraints).
+
+Acceleration limits and joint position limits conflict when a joint runs towards a limit faster
+than it can stop. With ``braking`` (default) the bound also keeps every joint slow enough to stop
+in time, braking at :math:`a_{max}`, while meeting the ``joint_limits`` bound
+:math:`v_k \le \gamma d_k / dt` at every later tick (:math:`d` the distance to the limit,
+:math:`\gamma` the joint-limit gain, 1 without a ``joint_limits`` constraint). In units of
+:math:`a_{max} dt` for velocities and :math:`a_{max} dt^2` for distances
+(:math:`\nu = v / (a_{max} dt)`, :math:`\delta = d / (a_{max} dt^2)`), braking from :math:`\nu`
+visits :math:`\nu - j` after :math:`j` ticks, having travelled :math:`j\nu - j(j-1)/2`, so it is
+admissible when :math:`\delta \ge (\nu - j)/\gamma + j\nu - j(j-1)/2` for every :math:`j`. The
+maximum over real :math:`j` (at :math:`j^* = \nu + c`, :math:`c = 1/2 - 1/\gamma`) gives the
+conservative closed form
+
+.. math::
+    \nu_{max}(\delta) = \begin{cases} \gamma\,\delta & \delta \le -c/\gamma \\
+        \sqrt{1/4 + 2(\delta - K_0)} - 1/2 & \text{otherwise} \end{cases},
+    \qquad K_0 = -c/\gamma - c(c - 1)/2,
+
+and :math:`|v| \le a_{max} dt\, \nu_{max}` towards each limit (for large :math:`\delta` this is the
+familiar :math:`v \approx \sqrt{2 a_{max} d}`). The bound is clipped to
+:math:`v_{prev} \mp a_{max} dt` so the module's own bounds never cross. The bounds are merged with
+the other box bounds; this module's ``importance`` (80) is below joint position and velocity
+limits, so when stopping in time is impossible anyway (a start outside the limits) it is the
+acceleration bound that gives (reported in ``StepResult.relaxed``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..robot import RobotModel, RobotState
+from ..validation import positive_float
+from .base import CONSTRAINTS, Constraint
+
+
+@CONSTRAINTS.register("acceleration_limits")
+class AccelerationLimits(Constraint):
+    r"""``|v - v_prev| <= a_max dt`` per actuated joint.
+
+    Args:
+        a_max: acceleration limit [rad/s^2]: one number for every actuated joint, or a mapping
+            joint name -> limit (key ``default`` for the joints not named; joints neither named nor
+            covered by ``default`` are not limited).
+        braking: also bound the velocity so that each joint can stop before its position limit
+            at ``a_max`` (module docstring).
+        name: constraint name.
+
+    Raises:
+        ConfigError: a non-positive limit or an unknown joint name.
+    """
+
+    importance = 80
+
+    def __init__(
+        self,
+        *,
+        a_max: float | Mapping[str, float],
+        braking: bool = True,
+        name: str | None = None,
+    ) -> None:
+        super().__init__(name)
+        if not isinstance(braking, bool):
+            raise ConfigError(f"braking must be true or false, got {braking!r}.")
+        self.braking = braking
+        if isinstance(a_max, Mapping):
+            self._spec: float | dict[str, float] = {
+                str(k): positive_float(v, f"a_max[{k!r}] [rad/s^2]") for k, v in a_max.items()
+            }
+        else:
+            self._spec = positive_float(a_max, "a_max [rad/s^2]")
+        self.a_max = np.zeros(0)
+
+    def bind(self, robot: RobotModel, *, path: str = "") -> None:
+        super().bind(robot, path=path)
+        nj = len(robot.joint_names)
+        spec = self._spec
+        if isinstance(spec, dict):
+            a = np.full(nj, spec.get("default", np.inf))
+            for jname, value in spec.items():
+                if jname == "default":
+                    continue
+                a[robot.joint_index(jname, path=f"{path}.a_max.{jname}")] = value
+        else:
+            a = np.full(nj, spec)
+        limited = np.isfinite(a)
+        self.a_max = a
+        self._vi = robot.joint_v_index[limited]
+        self._qi = robot.joint_q_index[limited]
+        self._a = a[limited]
+        self._qmin = robot.q_min[self._qi]  # may be -inf: no braking on that side
+        self._qmax = robot.q_max[self._qi]
+        self._set_gamma(1.0)
+        self._v_prev = np.zeros(robot.nv)
+        self._lb = np.full(robot.nv, -np.inf)
+        self._ub = np.full(robot.nv, np.inf)
+
+    def link(self, controller: Any) -> None:
+        """Read the gain and margin of the controller's ``joint_limits`` (called once built)."""
+        for c in controller.constraints:
+            if c.type_name == "joint_limits":
+                self._set_gamma(float(c.gain))
+                margin = float(getattr(c, "margin", 0.0))
+                qi = self._qi
+                self._qmin = self.robot.q_min[qi] + margin  # type: ignore[union-attr]
+                self._qmax = self.robot.q_max[qi] - margin  # type: ignore[union-attr]
+                break
+
+    def _set_gamma(self, gamma: float) -> None:
+        c = 0.5 - 1.0 / gamma
+        self._gamma = gamma
+        self._delta_lin = -c / gamma  # end of the linear (joint-limit-bound) branch
+        self._k0 = -c / gamma - 0.5 * c * (c - 1.0)
+
+    def _nu_max(self, delta: np.ndarray) -> np.ndarray:
+        """Normalized braking bound (module docstring); 0 at or beyond the limit."""
+        delta = np.maximum(delta, 0.0)  # -inf limits give +inf: no bound
+        sq = np.sqrt(0.25 + 2.0 * np.maximum(delta - self._k0, 0.0)) - 0.5
+        return np.where(delta <= self._delta_lin, self._gamma * delta, sq)
+
+    def reset(self, state: RobotState) -> None:
+        self._v_prev[...] = 0.0
+
+    def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
+        self._v_prev[...] = v
+
+    @property
+    def v_prev(self) -> np.ndarray:
+        """Velocity applied during the previous tick (nv,), read-only view."""
+        out = self._v_prev.view()
+        out.setflags(write=False)
+        return out
+
+    def compute_bounds(self, state: RobotState, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        a = self._a
+        dv = a * dt
+        vp = self._v_prev[self._vi]
+        lo, hi = vp - dv, vp + dv
+        if self.braking:
+            q = state.q[self._qi]
+            scale = 1.0 / (dt * dv)  # distances in units of a_max dt^2
+            up = dv * self._nu_max((self._qmax - q) * scale)
+            down = dv * self._nu_max((q - self._qmin) * scale)
+            hi = np.minimum(hi, np.maximum(up, lo))
+            lo = np.maximum(lo, np.minimum(-down, hi))
+        self._lb[self._vi] = lo
+        self._ub[self._vi] = hi
+        return self._lb, self._ub
+
+    def __repr__(self) -> str:
+        spec: Any = self._spec
+        return f"AccelerationLimits(a_max={spec}, braking={self.braking}, name={self.name!r})"

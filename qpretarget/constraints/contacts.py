@@ -1,0 +1,303 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Foot contacts: a 6-D equality per supporting foot, anchored where the foot was put down.
+
+For every active foot :math:`f` with anchor pose :math:`(p_a, R_a)` (the world pose of its sole
+frame when the contact was switched on) and current pose :math:`(p, R)`, the rows
+
+.. math::
+    J_f\, v = K\, e_f, \qquad
+    e_f = \begin{bmatrix} p_a - p \\ R \log_3(R^\top R_a) \end{bmatrix}
+
+hold as equalities (DESIGN.md "One tick": :math:`A v = b`, CRAC eq. 34-42 puts the feet first).
+:math:`J_f` is the LOCAL_WORLD_ALIGNED frame Jacobian (rows [linear; angular] in world axes), so
+:math:`J_f v\,dt = e_f` moves the sole back onto its anchor to first order: the angular error is the
+rotation vector taking :math:`R` to :math:`R_a`, expressed in world axes
+(:math:`R\exp(\log_3(R^\top R_a)) = R_a`). The gain :math:`K` [1/s] is the drift correction
+(default :math:`K = 1/dt`, the whole error in one tick).
+
+Drift comes from integrating :math:`q \oplus v\,dt` with a constant :math:`v`: the sole then
+moves by :math:`J_f v\,dt + \tfrac12 \dot J_f v\,dt^2 + O(dt^3)`, and at the joint speeds of
+fast motions (10-30 rad/s) the second-order term alone is millimetres per tick. With
+``second_order`` (default) the rows anticipate it,
+
+.. math:: J_f\, v = K e_f - \tfrac{dt}{2}\, \alpha_f(q, v_{prev}),
+
+where :math:`\alpha_f = \dot J_f v` is the frame's classical acceleration at zero joint acceleration
+(pinocchio ``getFrameClassicalAcceleration``), evaluated with the previous tick's velocity (exact
+when the velocity does not change; with ``acceleration_limits`` the change per tick is bounded).
+
+The block always has ``6 * n_feet`` rows; an inactive foot's rows are zero with infinite bounds, so
+switching contacts never changes the QP's shape.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ConfigError, UnknownNameError
+from ..robot import RobotModel, RobotState
+from ..robots import FootDescription
+from ..validation import positive_float
+from .base import CONSTRAINTS, Constraint, ConstraintBlock
+
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+@CONSTRAINTS.register("contacts")
+class Contacts(Constraint):
+    r"""Keep the supporting feet where they were put down (6-D equality per active foot).
+
+    Args:
+        feet: names of the robot's feet (``RobotModel.feet``, e.g. ``[left_foot, right_foot]``)
+            that may be in contact; default all of them.
+        frames: for robots without feet descriptions: contact name -> frame name, or
+            contact name -> ``{frame: NAME, rectangle: [x_min, x_max, y_min, y_max]}`` (sole
+            rectangle in the frame [m], needed by ``support_polygon``).
+        active: contacts active after ``reset`` (default: all).
+        gain: drift-correction gain :math:`K` [1/s]; ``None`` corrects the whole drift in one
+            tick (:math:`K = 1/dt`). :math:`K\,dt` is capped at 1.
+        second_order: anticipate the second-order drift of the tick (module docstring).
+        name: constraint name.
+
+    Raises:
+        ConfigError: unknown feet or frames, an empty contact set, a bad gain.
+    """
+
+    importance = 100
+
+    def __init__(
+        self,
+        *,
+        feet: Sequence[str] | None = None,
+        frames: Mapping[str, Any] | None = None,
+        active: Sequence[str] | None = None,
+        gain: float | None = None,
+        second_order: bool = True,
+        name: str | None = None,
+    ) -> None:
+        super().__init__(name)
+        if not isinstance(second_order, bool):
+            raise ConfigError(f"second_order must be true or false, got {second_order!r}.")
+        self.second_order = second_order
+        if feet is not None and (isinstance(feet, str) or not isinstance(feet, Sequence)):
+            raise ConfigError(f"feet must be a list of foot names, got {feet!r}.")
+        if frames is not None and not isinstance(frames, Mapping):
+            raise ConfigError(
+                f"frames must map a contact name to a frame name (or {{frame, rectangle}}), "
+                f"got {frames!r}."
+            )
+        if active is not None and (isinstance(active, str) or not isinstance(active, Sequence)):
+            raise ConfigError(f"active must be a list of contact names, got {active!r}.")
+        self._feet_spec = None if feet is None else [str(f) for f in feet]
+        self._frames_spec = None if frames is None else dict(frames)
+        self._active_spec = None if active is None else [str(a) for a in active]
+        self.gain = None if gain is None else positive_float(gain, "gain [1/s]")
+        self.names: list[str] = []
+        self.frame_ids: list[int] = []
+        self.rectangles: list[tuple[float, float, float, float] | None] = []
+        self._active = np.zeros(0, dtype=bool)
+        self._anchor_p = np.zeros((0, 3))
+        self._anchor_R = np.zeros((0, 3, 3))
+        #: Incremented whenever the active set or an anchor changes (listeners compare it).
+        self.version = 0
+
+    # ------------------------------------------------------------------ binding
+    def bind(self, robot: RobotModel, *, path: str = "") -> None:
+        super().bind(robot, path=path)
+        p = f"{path}." if path else ""
+        entries: list[tuple[str, str, tuple[float, float, float, float] | None]] = []
+        if self._feet_spec is not None or self._frames_spec is None:
+            feet = self._feet_spec if self._feet_spec is not None else list(robot.feet)
+            for i, foot in enumerate(feet):
+                if foot not in robot.feet:
+                    raise UnknownNameError(
+                        "foot",
+                        foot,
+                        list(robot.feet),
+                        path=f"{p}feet[{i}]",
+                        fix=(
+                            f"Robot {robot.name!r} has feet {list(robot.feet)}; for other "
+                            "contact frames use `frames: {name: frame}`."
+                        ),
+                    )
+                desc: FootDescription = robot.feet[foot]
+                entries.append((foot, desc.frame, tuple(desc.rectangle)))
+        for cname, spec in (self._frames_spec or {}).items():
+            rect = None
+            if isinstance(spec, str):
+                frame = spec
+            elif isinstance(spec, Mapping) and "frame" in spec:
+                frame = spec["frame"]
+                extra = set(spec) - {"frame", "rectangle"}
+                if extra:
+                    raise ConfigError(
+                        f"unknown key(s) {sorted(extra)} for contact {cname!r}; allowed: frame, "
+                        "rectangle.",
+                        path=f"{p}frames.{cname}",
+                    )
+                if spec.get("rectangle") is not None:
+                    r = np.asarray(spec["rectangle"], dtype=float)
+                    if r.shape != (4,) or not (r[0] < r[1] and r[2] < r[3]):
+                        raise ConfigError(
+                            "rectangle must be [x_min, x_max, y_min, y_max] with x_min < x_max "
+                            f"and y_min < y_max [m], got {spec['rectangle']!r}.",
+                            path=f"{p}frames.{cname}.rectangle",
+                        )
+                    rect = tuple(float(x) for x in r)
+            else:
+                raise ConfigError(
+                    f"contact {cname!r} must be a frame name or {{frame: NAME, rectangle: "
+                    f"[x_min, x_max, y_min, y_max]}}, got {spec!r}.",
+                    path=f"{p}frames.{cname}",
+                )
+            entries.append((str(cname), frame, rect))
+        if not entries:
+            raise ConfigError(
+                f"robot {robot.name!r} has no feet: name the contact frames with "
+                "`frames: {name: frame}`.",
+                path=path,
+            )
+        names = [e[0] for e in entries]
+        if len(set(names)) != len(names):
+            raise ConfigError(f"contact names must be unique, got {names}.", path=path)
+        self.names = names
+        self.frame_ids = [robot.frame_id(frame, path=f"{p}frames.{n}") for n, frame, _ in entries]
+        self.rectangles = [e[2] for e in entries]
+        n = len(entries)
+        self.n_rows = 6 * n
+        self._initial_active = self._check_names(
+            self._active_spec if self._active_spec is not None else names, f"{p}active"
+        )
+        self._active = np.zeros(n, dtype=bool)
+        self._anchor_p = np.zeros((n, 3))
+        self._anchor_R = np.tile(np.eye(3), (n, 1, 1))
+        self._C = np.zeros((self.n_rows, robot.nv))
+        self._b = np.zeros(self.n_rows)
+        self._l = np.full(self.n_rows, -np.inf)
+        self._u = np.full(self.n_rows, np.inf)
+        self._data2 = robot.model.createData()  # kinematics with the previous velocity
+        self._zero_a = np.zeros(robot.nv)
+
+    def _check_names(self, feet: Sequence[str], path: str) -> np.ndarray:
+        if isinstance(feet, str) or not isinstance(feet, Sequence):
+            raise ConfigError(f"contacts must be a list of names, got {feet!r}.", path=path)
+        mask = np.zeros(len(self.names), dtype=bool)
+        for f in feet:
+            if f not in self.names:
+                raise UnknownNameError(
+                    "contact", str(f), self.names, path=path, fix=f"Contacts: {self.names}."
+                )
+            mask[self.names.index(f)] = True
+        return mask
+
+    # ------------------------------------------------------------------ switching
+    @property
+    def active_feet(self) -> list[str]:
+        """Names of the contacts in force, in declaration order."""
+        return [n for n, a in zip(self.names, self._active, strict=True) if a]
+
+    def _anchor(self, i: int, state: RobotState) -> None:
+        M = state.frame_placement(self.frame_ids[i])
+        self._anchor_p[i] = M.translation
+        self._anchor_R[i] = M.rotation
+
+    def reset(self, state: RobotState) -> None:
+        """Activate the configured contacts, anchored at their current poses."""
+        self._active[...] = self._initial_active
+        for i in np.flatnonzero(self._active):
+            self._anchor(int(i), state)
+        self.version += 1
+
+    def set_contacts(self, feet: Sequence[str], state: RobotState) -> None:
+        """Switch the set of supporting feet.
+
+        A foot that becomes active is anchored at its current pose; a foot that stays active keeps
+        its anchor; a foot left out is released (its rows become inactive). Call it through
+        ``Controller.set_contacts``, which also tells the support polygon.
+
+        Args:
+            feet: names of the contacts in force from the next tick (may be empty).
+            state: current kinematics.
+
+        Raises:
+            UnknownNameError: a name that is not one of :attr:`names`.
+        """
+        new = self._check_names(list(feet), "set_contacts")
+        for i in np.flatnonzero(new & ~self._active):
+            self._anchor(int(i), state)
+        self._active[...] = new
+        self.version += 1
+
+    def anchor_pose(self, foot: str) -> pin.SE3:
+        """World pose of the anchor of contact ``foot`` (meaningful while it is active)."""
+        i = self._check_names([foot], "anchor_pose").argmax()
+        return pin.SE3(self._anchor_R[i].copy(), self._anchor_p[i].copy())
+
+    def sole_corners_in_world(self) -> np.ndarray:
+        """World corners (4 per active sole, (4 k, 3)) of the active soles at their anchors.
+
+        Raises:
+            ConfigError: an active contact has no sole rectangle (``frames:`` without one).
+        """
+        out = []
+        for i in np.flatnonzero(self._active):
+            rect = self.rectangles[i]
+            if rect is None:
+                raise ConfigError(
+                    f"contact {self.names[i]!r} has no sole rectangle; give "
+                    "`frames: {name: {frame: F, rectangle: [x_min, x_max, y_min, y_max]}}` to use "
+                    "a support polygon.",
+                    path=getattr(self, "yaml_path", ""),
+                )
+            x0, x1, y0, y1 = rect
+            local = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+            out.append(local @ self._anchor_R[i].T + self._anchor_p[i])
+        return np.concatenate(out) if out else np.zeros((0, 3))
+
+    # ------------------------------------------------------------------ per tick
+    def errors(self, state: RobotState) -> np.ndarray:
+        """Stacked 6-D errors ``[p_a - p; R log3(R' R_a)]`` of every contact (n, 6)."""
+        n = len(self.names)
+        e = np.zeros((n, 6))
+        for i in range(n):
+            M = state.frame_placement(self.frame_ids[i])
+            R = M.rotation
+            e[i, :3] = self._anchor_p[i] - M.translation
+            e[i, 3:] = R @ pin.log3(R.T @ self._anchor_R[i])
+        return e
+
+    def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
+        k = 1.0 / dt if self.gain is None else min(self.gain, 1.0 / dt)
+        C, b, lo, hi = self._C, self._b, self._l, self._u
+        drift = self.second_order and bool(self._active.any()) and bool(np.any(state.v))
+        if drift:
+            model = state.model
+            pin.forwardKinematics(model, self._data2, state.q, state.v, self._zero_a)
+        for i, fid in enumerate(self.frame_ids):
+            rows = slice(6 * i, 6 * i + 6)
+            if not self._active[i]:
+                C[rows] = 0.0
+                lo[rows] = -np.inf
+                hi[rows] = np.inf
+                continue
+            M = state.frame_placement(fid)
+            R = M.rotation
+            C[rows] = state.frame_jacobian(fid)
+            b[6 * i : 6 * i + 3] = k * (self._anchor_p[i] - M.translation)
+            b[6 * i + 3 : 6 * i + 6] = k * (R @ pin.log3(R.T @ self._anchor_R[i]))
+            if drift:
+                acc = pin.getFrameClassicalAcceleration(model, self._data2, fid, LWA)
+                b[rows] -= (0.5 * dt) * acc.vector
+            lo[rows] = b[rows]
+            hi[rows] = b[rows]
+        return ConstraintBlock(self.name, C, lo, hi)
+
+    def __repr__(self) -> str:
+        return (
+            f"Contacts(contacts={self.names}, active={self.active_feet}, gain={self.gain}, "
+            f"second_order={self.second_order}, name={self.name!r})"
+        )

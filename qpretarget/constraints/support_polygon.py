@@ -1,0 +1,273 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Centre of mass over the feet: its ground projection inside the shrunk support polygon.
+
+The support polygon is the convex hull of the corners of the active soles (at their contact
+anchors), each edge :math:`k` with outward unit normal :math:`n_k` and offset :math:`o_k` moved
+inwards by ``margin``: inside means :math:`n_k^\top c_{xy} \le o_k` for every edge. DESIGN.md
+("One tick") linearizes the CoM one tick ahead, :math:`n_k^\top (c_{xy} + J_{com,xy} v\,dt) \le
+o_k`; this module uses the velocity-damper form of it,
+
+.. math:: n_k^\top J_{com,xy}\, v \le \gamma\, \frac{o_k - n_k^\top c_{xy}}{dt},
+          \qquad 0 < \gamma \le 1,
+
+(the same damper as the self-collision rows of DESIGN.md, Kanoun/Faverjon-Tournassoud style):
+inside the polygon the CoM may close at most a fraction :math:`\gamma` of its distance to each
+edge per tick, so it approaches an edge smoothly and never crosses it to first order; outside, the
+right-hand side is negative and the row *demands* that the CoM move back by that fraction per
+tick, so the constraint recovers instead of being infeasible forever (when the demand is more than
+the other constraints allow this tick, the relaxation of ``qpretarget.relaxation`` lets this
+constraint give first and reports it). :math:`\gamma = 1` is DESIGN.md's plain linearization.
+
+The hull is recomputed only when the contacts change (``on_contacts_changed``, reset), never per
+tick. The block keeps ``max_edges`` rows (4 per contact); unused rows are inactive.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..robot import RobotModel, RobotState
+from ..validation import positive_float
+from .base import CONSTRAINTS, Constraint, ConstraintBlock
+
+
+def convex_hull_2d(points: np.ndarray) -> np.ndarray:
+    """Vertices of the convex hull of 2-D points, counter-clockwise (Andrew's monotone chain).
+
+    Collinear points on an edge are dropped. Runs only when contacts change (a few dozen points).
+
+    Args:
+        points: (m, 2) points.
+
+    Returns:
+        (h, 2) hull vertices in counter-clockwise order (h <= m; fewer than 3 for degenerate sets).
+    """
+    pts = np.unique(np.asarray(points, dtype=float).reshape(-1, 2), axis=0)  # sorted by x, then y
+    if len(pts) <= 2:
+        return pts
+
+    def half(seq: np.ndarray) -> list[np.ndarray]:
+        out: list[np.ndarray] = []
+        for p in seq:
+            while len(out) >= 2:
+                a, b = out[-2], out[-1]
+                if (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) > 1e-12:
+                    break
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def polygon_halfplanes(vertices: np.ndarray, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    r"""Half-planes :math:`n_k^\top x \le o_k` of a counter-clockwise convex polygon, shrunk.
+
+    Args:
+        vertices: (h, 2) counter-clockwise vertices, h >= 3.
+        margin: distance every edge is moved inwards [m].
+
+    Returns:
+        ``(normals, offsets)``: (h, 2) outward unit normals and (h,) offsets.
+    """
+    a = vertices
+    d = np.roll(a, -1, axis=0) - a  # edge vectors a_k -> a_{k+1}
+    n = np.stack([d[:, 1], -d[:, 0]], axis=1)  # outward for a counter-clockwise polygon
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    return n, np.einsum("ij,ij->i", n, a) - margin
+
+
+def inscribed_radius(normals: np.ndarray, offsets: np.ndarray) -> float:
+    r"""Radius of the largest disc inside :math:`\{x : N x \le o\}` (Chebyshev radius).
+
+    The optimal centre is equidistant from three edges (for a polygon): every triple of edges
+    gives a candidate :math:`[n_i^\top\ 1] [x; r] = o_i`; the largest feasible :math:`r` wins.
+    Runs only when contacts change (a few hundred 3x3 systems).
+    """
+    k = len(normals)
+    if k < 3:
+        return 0.0
+    idx = np.array([(i, j, m) for i in range(k) for j in range(i + 1, k) for m in range(j + 1, k)])
+    A = np.concatenate([normals[idx], np.ones((len(idx), 3, 1))], axis=2)  # (T, 3, 3)
+    ok = np.abs(np.linalg.det(A)) > 1e-12
+    if not ok.any():
+        return 0.0
+    sol = np.linalg.solve(A[ok], offsets[idx[ok]][..., None])[..., 0]  # (T', 3): x, y, r
+    inside = np.all(sol[:, :2] @ normals.T + sol[:, 2:3] <= offsets + 1e-12, axis=1)
+    return float(max(sol[inside, 2].max(initial=0.0), 0.0))
+
+
+@CONSTRAINTS.register("support_polygon")
+class SupportPolygon(Constraint):
+    r"""Keep the CoM ground projection inside the active soles' convex hull shrunk by ``margin``.
+
+    Args:
+        margin: distance kept from every edge of the support polygon [m].
+        gain: damper gain :math:`\gamma` in (0, 1]: fraction of the distance to an edge the CoM
+            may close (or, outside, must recover) per tick.
+        max_edges: number of rows (default 4 per contact of the ``contacts`` constraint, or per
+            robot foot without one).
+        name: constraint name.
+
+    Without a ``contacts`` constraint in the controller, the polygon is made of all the robot's
+    feet at their poses at reset.
+    """
+
+    importance = 60
+
+    def __init__(
+        self,
+        *,
+        margin: float = 0.01,
+        gain: float = 0.2,
+        max_edges: int | None = None,
+        name: str | None = None,
+    ) -> None:
+        super().__init__(name)
+        self.margin = positive_float(margin, "margin [m]", allow_zero=True)
+        self.gain = positive_float(gain, "gain")
+        if self.gain > 1:
+            raise ConfigError(f"gain must be in (0, 1] (a fraction per tick), got {gain!r}.")
+        if max_edges is not None and (
+            isinstance(max_edges, bool) or not isinstance(max_edges, int) or max_edges < 3
+        ):
+            raise ConfigError(f"max_edges must be an integer >= 3, got {max_edges!r}.")
+        self._max_edges = max_edges
+        self.contacts: Any = None
+        self._seen_version = -1
+        self.normals = np.zeros((0, 2))
+        self.offsets = np.zeros(0)
+        self.vertices = np.zeros((0, 2))
+        self.effective_margin = self.margin
+
+    def bind(self, robot: RobotModel, *, path: str = "") -> None:
+        super().bind(robot, path=path)
+        self.n_rows = self._max_edges or 4 * max(len(robot.feet), 1)
+        self._C = np.zeros((self.n_rows, robot.nv))
+        self._l = np.full(self.n_rows, -np.inf)
+        self._u = np.full(self.n_rows, np.inf)
+        self._N = np.zeros((self.n_rows, 2))
+        self._o = np.zeros(self.n_rows)
+        self._n_edges = 0
+
+    def link(self, controller: Any) -> None:
+        """Find the controller's ``contacts`` constraint (called once the controller is built).
+
+        Raises:
+            ConfigError: the contacts can make more hull edges than this block has rows.
+        """
+        for c in controller.constraints:
+            if hasattr(c, "sole_corners_in_world") and hasattr(c, "set_contacts"):
+                self.contacts = c
+                break
+        if self.contacts is not None and 4 * len(self.contacts.names) > self.n_rows:
+            raise ConfigError(
+                f"{len(self.contacts.names)} contacts can make a hull of "
+                f"{4 * len(self.contacts.names)} edges but max_edges is {self.n_rows}; raise "
+                "max_edges.",
+                path=getattr(self, "yaml_path", ""),
+            )
+
+    # ------------------------------------------------------------------ hull
+    def _corners(self, state: RobotState) -> np.ndarray:
+        if self.contacts is not None:
+            return self.contacts.sole_corners_in_world()
+        robot = self.robot
+        out = []
+        for foot in robot.feet.values():  # type: ignore[union-attr]
+            M = state.frame_placement(robot.frame_id(foot.frame))  # type: ignore[union-attr]
+            x0, x1, y0, y1 = foot.rectangle
+            local = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+            out.append(local @ M.rotation.T + M.translation)
+        return np.concatenate(out) if out else np.zeros((0, 3))
+
+    def update_polygon(self, state: RobotState) -> None:
+        """Recompute the shrunk hull from the active soles (call when contacts change).
+
+        A margin larger than the polygon allows is reduced to 90 % of its inscribed radius, with
+        a warning (the loop goes on).
+        """
+        corners = self._corners(state)
+        self._N[...] = 0.0
+        self._o[...] = 0.0
+        self._n_edges = 0
+        self.vertices = convex_hull_2d(corners[:, :2]) if len(corners) else np.zeros((0, 2))
+        if self.contacts is not None:
+            self._seen_version = self.contacts.version
+        if len(self.vertices) < 3:  # no support (flight phase): no row
+            self.normals, self.offsets = np.zeros((0, 2)), np.zeros(0)
+            return
+        normals, offsets = polygon_halfplanes(self.vertices, 0.0)
+        if len(normals) > self.n_rows:
+            raise ConfigError(
+                f"the support polygon has {len(normals)} edges but max_edges is {self.n_rows}; "
+                "raise max_edges.",
+                path=getattr(self, "yaml_path", ""),
+            )
+        margin = self.margin
+        if margin > 0:
+            r = inscribed_radius(normals, offsets)
+            if margin >= r:
+                margin = 0.9 * r
+                warnings.warn(
+                    f"support_polygon: margin {self.margin} m is larger than the support "
+                    f"polygon allows (inscribed radius {r:.4f} m); using {margin:.4f} m for "
+                    "these contacts. Lower `margin`.",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+        self.effective_margin = margin
+        offsets = offsets - margin
+        k = len(normals)
+        self.normals, self.offsets = normals, offsets
+        self._N[:k] = normals
+        self._o[:k] = offsets
+        self._n_edges = k
+
+    def reset(self, state: RobotState) -> None:
+        self._seen_version = -1
+        if self.contacts is None:
+            self.update_polygon(state)
+
+    def on_contacts_changed(self, contacts: Any, state: RobotState) -> None:
+        """Hook of ``Controller.set_contacts``: rebuild the polygon from the new contact set."""
+        if self.contacts is None:
+            self.contacts = contacts
+        self.update_polygon(state)
+
+    def com_margin(self, state: RobotState) -> float:
+        r"""Signed margin of the CoM projection: :math:`\min_k (o_k - n_k^\top c_{xy})` [m].
+
+        Positive inside the shrunk polygon, negative outside (``-inf`` without support).
+        """
+        self._sync(state)
+        if self._n_edges == 0:
+            return -np.inf
+        return float(np.min(self.offsets - self.normals @ state.com()[:2]))
+
+    def _sync(self, state: RobotState) -> None:
+        if self.contacts is not None and self.contacts.version != self._seen_version:
+            self.update_polygon(state)
+
+    # ------------------------------------------------------------------ per tick
+    def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
+        self._sync(state)
+        k = self._n_edges
+        if k:
+            Jxy = state.com_jacobian()[:2]  # (2, nv)
+            np.matmul(self._N[:k], Jxy, out=self._C[:k])
+            self._u[:k] = (self.gain / dt) * (self._o[:k] - self._N[:k] @ state.com()[:2])
+        self._C[k:] = 0.0
+        self._u[k:] = np.inf
+        return ConstraintBlock(self.name, self._C, self._l, self._u)
+
+    def __repr__(self) -> str:
+        return (
+            f"SupportPolygon(margin={self.margin}, gain={self.gain}, max_edges={self.n_rows}, "
+            f"name={self.name!r})"
+        )

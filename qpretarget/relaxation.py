@@ -1,0 +1,301 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Infeasibility never kills the loop: relax the hard constraints in a fixed order of importance.
+
+When the tick's QP has no solution (a start outside the joint limits, a pair already penetrating,
+the CoM already outside the polygon, a contact set that cannot be kept), the controller hands the
+:class:`~qpretarget.strategies.TickProblem` to :meth:`Fallback.solve`, which works in two phases.
+
+**Phase 1: the least relaxation.** With non-negative slacks on both sides of every constraint
+row (:math:`s^-, s^+`) and of every box bound (:math:`b^-, b^+`),
+
+.. math::
+    \min_{v, s, b \ge 0}\ w^\top (s^- + s^+) + w_{lb}^\top b^- + w_{ub}^\top b^+
+        + \tfrac{\epsilon}{2} (|s|^2 + |b|^2) + \tfrac{\rho}{2} |v|^2
+    \quad \text{s.t.} \quad l \le C v + s^- - s^+ \le u, \quad
+    lb \le v + b^- - b^+ \le ub,
+
+an exact (L1) penalty: a slack is non-zero only where the constraints cannot all hold. The weight
+of a slack grows with the importance of the constraint owning the row,
+:math:`w = r^{\text{rank}}` (rank 0 for the least important constraint, ratio :math:`r = 10` by
+default), so the least important constraint gives first and contacts and joint/velocity limits
+give last. A box entry is owned by the most important constraint whose own bound is at (or
+tighter than) the merged bound, the one that widening it would violate.
+
+**Phase 2: the best motion within it.** The controller's strategy solves the tick again, with the
+rows and bounds widened by the phase-1 slacks only, so tracking is as good as the relaxed
+constraints allow (and a hierarchy keeps its priorities). If that fails too, the phase-1 velocity
+(the smallest one meeting the relaxed constraints) is used.
+
+Each slack is reported in ``StepResult.relaxed`` under its constraint's name, as the largest slack
+of its rows, in the rows' units ([m/s] or [rad/s]: multiply by ``dt`` for a displacement); the
+amount a box bound already gave in ``Controller.build_tick``'s merge is added.
+
+Until the controller calls a ``link(controller)`` hook itself, :func:`make_fallback` calls it on
+every constraint that has one (the support polygon uses it to find the contacts).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .constraints.base import Constraint
+from .errors import ConfigError, close_matches_hint
+from .problem import QPProblem
+from .solvers import ProxSuiteSolver, make_solver
+from .validation import positive_float
+
+_KEYS = ("enabled", "ratio", "report_tolerance", "solver")
+
+
+@dataclasses.dataclass(slots=True)
+class FallbackResult:
+    """Result of a relaxed solve.
+
+    Attributes:
+        x: velocity (nv,), or ``None`` when even the relaxation failed.
+        relaxed: constraint name -> largest slack of its rows/bounds (row units).
+        status: ``"relaxed"`` (phase 2 solved), ``"least-relaxation"`` (phase-1 velocity used)
+            or the failing solver status.
+        solve_time: time of both phases [s].
+    """
+
+    x: np.ndarray | None
+    relaxed: dict[str, float]
+    status: str
+    solve_time: float = 0.0
+
+
+def make_fallback(controller: Any, spec: Mapping[str, Any] | None) -> Fallback | None:
+    """Build the relaxation fallback of ``controller`` from the YAML ``fallback:`` section.
+
+    Args:
+        controller: the controller being built (constraints bound, strategy bound).
+        spec: ``None`` (defaults) or ``{enabled, ratio, report_tolerance, solver}``.
+
+    Returns:
+        The :class:`Fallback`, or ``None`` with ``enabled: false`` (a failed tick then holds).
+
+    Raises:
+        ConfigError: unknown keys or bad values, with the YAML path.
+    """
+    for con in controller.constraints:
+        link = getattr(con, "link", None)
+        if link is not None:
+            link(controller)
+    if spec is None:
+        spec = {}
+    if not isinstance(spec, Mapping):
+        raise ConfigError(
+            "fallback must be a mapping {enabled, ratio, report_tolerance, solver}, "
+            f"got {spec!r}.",
+            path="fallback",
+        )
+    for key in spec:
+        if key not in _KEYS:
+            raise ConfigError(
+                f"unknown key {key!r}.{close_matches_hint(str(key), _KEYS)} Allowed keys: "
+                f"{', '.join(_KEYS)}.",
+                path=f"fallback.{key}",
+            )
+    enabled = spec.get("enabled", True)
+    if not isinstance(enabled, bool):
+        raise ConfigError(
+            f"enabled must be true or false, got {enabled!r}.", path="fallback.enabled"
+        )
+    if not enabled:
+        return None
+    try:
+        ratio = positive_float(spec.get("ratio", 10.0), "ratio")
+        tol = positive_float(spec.get("report_tolerance", 1e-7), "report_tolerance")
+    except ConfigError as exc:
+        raise ConfigError(exc.bare_message, path="fallback") from None
+    if ratio <= 1:
+        raise ConfigError(f"ratio must be > 1, got {ratio!r}.", path="fallback.ratio")
+    solver_spec = spec.get("solver")
+    solver = (
+        ProxSuiteSolver(eps_abs=1e-9, max_iter=10000, warm_start=False)
+        if solver_spec is None
+        else make_solver(solver_spec, path="fallback.solver")
+    )
+    return Fallback(controller, ratio=ratio, report_tolerance=tol, solver=solver)
+
+
+class Fallback:
+    r"""Two-phase relaxation of a tick whose hard constraints conflict (module docstring).
+
+    Args:
+        controller: the controller (its constraints, strategy and row layout are read).
+        ratio: weight ratio between consecutive importance ranks (> 1).
+        report_tolerance: slacks below this are not reported (row units).
+        solver: solver of the phase-1 QP (own workspace; the shape is fixed).
+    """
+
+    #: Quadratic regularization of the slacks and of the velocity in phase 1 (ProxSuite needs
+    #: some curvature: with 1e-6 it reported feasible relaxations as primal infeasible).
+    EPS_SLACK = 1e-4
+    RHO_V = 1e-4
+    #: Extra widening of the relaxed sides in phase 2, so that phase 1's tolerance cannot make
+    #: phase 2 infeasible [row units].
+    WIDEN = 1e-4
+
+    def __init__(
+        self, controller: Any, *, ratio: float, report_tolerance: float, solver: Any
+    ) -> None:
+        self.controller = controller
+        self.ratio = ratio
+        self.report_tolerance = report_tolerance
+        self.solver = solver
+        nv, m = controller.robot.nv, controller.n_rows
+        self.nv, self.m = nv, m
+        levels = sorted({c.importance for c in controller.constraints})
+        self.weight_of = {
+            c.name: ratio ** levels.index(c.importance) for c in controller.constraints
+        }
+        # Row groups: constraint -> slice of the stacked rows.
+        self.groups: list[tuple[str, slice]] = []
+        i = 0
+        for con in controller._row_constraints:
+            self.groups.append((con.name, slice(i, i + con.n_rows)))
+            i += con.n_rows
+        w_rows = np.ones(m)
+        for name, sl in self.groups:
+            w_rows[sl] = self.weight_of[name]
+        base = Constraint.compute_bounds
+        self._bound_cons = [
+            c for c in controller._bound_constraints if type(c).compute_bounds is not base
+        ]
+        # Phase-1 QP: x = [v (nv); s- (m); s+ (m); b- (nv); b+ (nv)], rows
+        #   l <= C v + s- - s+ <= u,   lb <= v + b- - b+ <= ub,   slacks >= 0.
+        self._sl = {
+            "s-": slice(nv, nv + m),
+            "s+": slice(nv + m, nv + 2 * m),
+            "b-": slice(nv + 2 * m, 2 * nv + 2 * m),
+            "b+": slice(2 * nv + 2 * m, 3 * nv + 2 * m),
+        }
+        n = 3 * nv + 2 * m
+        self._p = p = QPProblem(n, m + nv)
+        p.H[np.arange(nv), np.arange(nv)] = self.RHO_V
+        p.H[np.arange(nv, n), np.arange(nv, n)] = self.EPS_SLACK
+        sl = self._sl
+        p.C[:m, sl["s-"]] = np.eye(m)
+        p.C[:m, sl["s+"]] = -np.eye(m)
+        p.C[m:, :nv] = np.eye(nv)
+        p.C[m:, sl["b-"]] = np.eye(nv)
+        p.C[m:, sl["b+"]] = -np.eye(nv)
+        p.g[sl["s-"]] = w_rows
+        p.g[sl["s+"]] = w_rows
+        p.lb[nv:] = 0.0
+
+    # ------------------------------------------------------------------ helpers
+    def _box_owners(
+        self, tp: Any
+    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]:
+        """Weights of the box slacks and, per bound constraint, the entries it owns.
+
+        The owner of a merged bound is the most important constraint whose own bound is at or
+        tighter than it (widening the merged bound violates that constraint first).
+        """
+        nv = self.nv
+        w_lo, w_hi = np.ones(nv), np.ones(nv)
+        free_lo, free_hi = np.ones(nv, dtype=bool), np.ones(nv, dtype=bool)
+        own_lo, own_hi = [], []
+        lb, ub = tp.lb, tp.ub
+        tol_lo = 1e-9 * (1.0 + np.abs(np.where(np.isfinite(lb), lb, 0.0)))
+        tol_hi = 1e-9 * (1.0 + np.abs(np.where(np.isfinite(ub), ub, 0.0)))
+        for con in self._bound_cons:  # most important first
+            b = con.compute_bounds(tp.state, tp.dt)
+            if b is None:
+                own_lo.append(np.zeros(nv, dtype=bool))
+                own_hi.append(np.zeros(nv, dtype=bool))
+                continue
+            clo, chi = b
+            mlo = free_lo & np.isfinite(clo) & (clo >= lb - tol_lo)
+            mhi = free_hi & np.isfinite(chi) & (chi <= ub + tol_hi)
+            w = self.weight_of[con.name]
+            w_lo[mlo] = w
+            w_hi[mhi] = w
+            free_lo &= ~mlo
+            free_hi &= ~mhi
+            own_lo.append(mlo)
+            own_hi.append(mhi)
+        return w_lo, w_hi, own_lo, own_hi
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, tp: Any, failed_result: Any = None) -> FallbackResult | None:
+        """Relax this tick's hard constraints in order of importance and solve again.
+
+        Args:
+            tp: the tick problem that failed. Its box ``lb, ub`` is widened in place to the
+                relaxed box (the controller clips the applied velocity to it).
+            failed_result: the strategy's failed result (unused).
+
+        Returns:
+            A :class:`FallbackResult` (``x is None`` when even the relaxation failed); never
+            raises on numerical trouble.
+        """
+        t0 = time.perf_counter()
+        nv, m, p, sl = self.nv, self.m, self._p, self._sl
+        C, lo, hi, lb, ub = tp.C, tp.l, tp.u, tp.lb, tp.ub
+        if not (np.isfinite(C).all() and not np.isnan(lo).any() and not np.isnan(hi).any()):
+            return FallbackResult(None, {}, "non-finite constraint rows", time.perf_counter() - t0)
+        w_lo, w_hi, own_lo, own_hi = self._box_owners(tp)
+        p.C[:m, :nv] = C
+        p.l[:m], p.u[:m] = lo, hi
+        p.l[m:], p.u[m:] = lb, ub
+        p.g[sl["b-"]] = w_lo
+        p.g[sl["b+"]] = w_hi
+        try:
+            sol = self.solver.solve(p)
+        except Exception as exc:  # noqa: BLE001 - the loop must go on
+            return FallbackResult(None, {}, f"relaxation failed: {exc}", time.perf_counter() - t0)
+        if sol.x is None or not sol.success:
+            return FallbackResult(
+                None, {}, f"relaxation failed: {sol.status}", time.perf_counter() - t0
+            )
+        x = sol.x
+        s_lo, s_hi = np.maximum(x[sl["s-"]], 0.0), np.maximum(x[sl["s+"]], 0.0)
+        b_lo, b_hi = np.maximum(x[sl["b-"]], 0.0), np.maximum(x[sl["b+"]], 0.0)
+        tol = self.report_tolerance
+        relaxed: dict[str, float] = {}
+        for name, rows in self.groups:
+            amount = float(max(s_lo[rows].max(initial=0.0), s_hi[rows].max(initial=0.0)))
+            if amount > tol:
+                relaxed[name] = amount
+        for con, mlo, mhi in zip(self._bound_cons, own_lo, own_hi, strict=True):
+            amount = max(float(b_lo[mlo].max(initial=0.0)), float(b_hi[mhi].max(initial=0.0)))
+            if amount > tol:
+                relaxed[con.name] = max(relaxed.get(con.name, 0.0), amount)
+        gave = getattr(self.controller, "_bound_gave", None) or {}
+        for name in relaxed:
+            relaxed[name] += gave.get(name, 0.0)
+
+        # Phase 2: the strategy again, with only the relaxed sides widened.
+        widen = self.WIDEN
+        l2 = np.where(s_lo > tol, lo - s_lo - widen, lo)
+        u2 = np.where(s_hi > tol, hi + s_hi + widen, hi)
+        lb2 = np.where(b_lo > tol, lb - b_lo - widen, lb)
+        ub2 = np.where(b_hi > tol, ub + b_hi + widen, ub)
+        tp2 = dataclasses.replace(tp, l=l2, u=u2, lb=lb2, ub=ub2)
+        v = None
+        status = "relaxed"
+        try:
+            res = self.controller.strategy.solve(tp2)
+            if res.success and res.x is not None and np.all(np.isfinite(res.x)):
+                v = res.x
+        except Exception:  # noqa: BLE001 - the loop must go on; phase 1's velocity is safe
+            v = None
+        if v is None:
+            v = x[:nv].copy()
+            status = "least-relaxation"
+        # The controller clips the applied velocity to this tick's box: make that the relaxed box.
+        tp.lb[...] = lb2
+        tp.ub[...] = ub2
+        return FallbackResult(v, relaxed, status, time.perf_counter() - t0)
+
+    def __repr__(self) -> str:
+        return f"Fallback(ratio={self.ratio}, report_tolerance={self.report_tolerance})"
