@@ -6,7 +6,7 @@ key-point skeleton, the task targets (red) and reached points (blue), the suppor
 ground projection, collision pairs within the influence distance (red lines between witness
 points), a timeline with play/pause and speed, and the numbers of the current frame.
 ``qpretarget view CONFIG.yaml`` shows the reference posture with key-point frames, the collision
-geometry the controller uses and its pairs. :class:`LivePublisher` streams a running controller.
+geometry the controller uses and its pairs. :class:`LiveViewer` streams a running controller.
 
 viser is an optional dependency (``pip install qpretarget[viz]``).
 """
@@ -293,10 +293,6 @@ class Viewer:
         self.server.gui.add_markdown("\n".join(lines))
 
     # ------------------------------------------------------------------ live
-    def publisher(self, max_rate: float = 30.0) -> LivePublisher:
-        """An observer for :meth:`Controller.add_observer` that streams each tick (see below)."""
-        return LivePublisher(self, max_rate=max_rate)
-
     def serve_forever(self) -> None:
         """Block until Ctrl-C, then shut down cleanly."""
         try:
@@ -322,45 +318,104 @@ class Viewer:
         self.close()
 
 
-class LivePublisher:
-    """Streams a running controller to a :class:`Viewer` without slowing its loop.
+def _live_main(robot_spec: Any, base_dir: str | None, host: str, port: int, shared: Any,
+               counter: Any, stop: Any, ready: Any, max_rate: float) -> None:  # fmt: skip
+    """Child process of :class:`LiveViewer`: hosts the viser server and draws the latest q."""
+    from pathlib import Path
 
-    Calling it (``publisher(result)``, as a controller observer does) only stores the latest
-    configuration under a lock; a background thread sends it to the browser at most ``max_rate``
-    times per second. The loop's cost is a few microseconds per tick whatever the viewer does.
+    from ..robot import load_robot
+
+    spec = robot_spec
+    if isinstance(spec, dict) and base_dir is not None:
+        spec = dict(spec)
+        for k in ("urdf", "srdf"):
+            if spec.get(k) and not str(spec[k]).startswith("example-robot-data:"):
+                spec[k] = str((Path(base_dir) / str(spec[k])).resolve())
+    viewer = Viewer(load_robot(spec), host=host, port=port, verbose=False)
+    ready.put(viewer.port)
+    view = np.frombuffer(shared.get_obj(), dtype=float)
+    period = 1.0 / max_rate
+    seen = 0
+    try:
+        while not stop.is_set():
+            time.sleep(period)
+            if counter.value != seen:
+                with shared.get_lock():
+                    q = view.copy()
+                    seen = counter.value
+                viewer.set_configuration(q)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        viewer.close()
+
+
+class LiveViewer:
+    """A browser viewer in its own process, fed by a running controller.
+
+    ``ctrl.add_observer(LiveViewer(ctrl))`` streams every tick: the control loop only copies the
+    new configuration into shared memory (a few microseconds, never blocking on the viewer), and
+    the viewer process draws the newest one at most ``max_rate`` times per second. Being another
+    process, it takes no time from the loop's interpreter (no GIL contention, no pickling).
+
+    Args:
+        controller: the controller whose robot is shown.
+        host, port: where to serve (``port=0``: any free port; a taken port moves to a free one).
+        max_rate: drawing rate cap [Hz].
     """
 
-    def __init__(self, viewer: Viewer, *, max_rate: float = 30.0) -> None:
-        self.viewer = viewer
-        self.period = 1.0 / max_rate
-        self._latest: np.ndarray | None = None
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
+    def __init__(self, controller: Any, *, host: str = "127.0.0.1", port: int = 8080,
+                 max_rate: float = 30.0, timeout: float = 120.0) -> None:  # fmt: skip
+        import multiprocessing as mp
+
+        _viser()  # fail early, in this process, when the extra is missing
+        ctx = mp.get_context("spawn")
+        nq = controller.robot.nq
+        self._shared = ctx.Array("d", nq)
+        self._counter = ctx.Value("L", 0, lock=False)
+        self._stop = ctx.Event()
+        self._view = np.frombuffer(self._shared.get_obj(), dtype=float)
+        ready = ctx.Queue()
+        port, note = choose_port(host, port)
+        if note:
+            print(f"qpretarget live viewer: {note}")
+        base = getattr(controller, "base_dir", None)
+        self._proc = ctx.Process(
+            target=_live_main,
+            args=(controller.config["robot"], str(base) if base else None, host, port,
+                  self._shared, self._counter, self._stop, ready, max_rate),
+            daemon=True,
+            name="qpretarget-live-viewer",
+        )  # fmt: skip
+        self._proc.start()
+        try:
+            self.port = int(ready.get(timeout=timeout))
+        except Exception:
+            self._proc.terminate()
+            raise ViewerError("the live viewer process did not start (see its output).") from None
+        self.url = f"http://{host}:{self.port}"
         self.sent = 0
-        self._thread = threading.Thread(target=self._run, daemon=True, name="qpretarget-live")
-        self._thread.start()
 
     def __call__(self, result: Any) -> None:
+        """Publish the tick's configuration to the viewer process."""
         q = result.q if hasattr(result, "q") else result
-        with self._lock:
-            self._latest = q
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            time.sleep(self.period)
-            with self._lock:
-                q, self._latest = self._latest, None
-            if q is not None:
-                try:
-                    self.viewer.set_configuration(q)
-                    self.sent += 1
-                except Exception:  # the browser side must never kill the controller loop
-                    pass
+        with self._shared.get_lock():
+            np.copyto(self._view, q)
+            self._counter.value += 1
+        self.sent += 1
 
     def close(self) -> None:
-        """Stop streaming."""
+        """Stop the viewer process."""
         self._stop.set()
-        self._thread.join(timeout=1.0)
+        self._proc.join(timeout=5.0)
+        if self._proc.is_alive():
+            self._proc.terminate()
+
+    def __enter__(self) -> LiveViewer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 ObserverFn = Callable[[Any], None]
