@@ -68,7 +68,8 @@ def main() -> None:
         proc.terminate()
     for name, x in (("no viewer", base), ("live viewer", live)):
         print(
-            f"{name:12s} step median {np.median(x) * 1e6:7.1f} µs  p95 {np.percentile(x, 95) * 1e6:7.1f} µs"
+            f"{name:12s} step median {np.median(x) * 1e6:7.1f} µs  "
+            f"p95 {np.percentile(x, 95) * 1e6:7.1f} µs"
         )
     print(
         f"frames published: {viewer.sent}; slow-down of the median step: "
