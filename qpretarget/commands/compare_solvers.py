@@ -15,8 +15,8 @@ HELP = """examples:
       a solver that is not installed is listed as such
 
 MOTION is 'scripted' or 'scripted:SECONDS' (built-in smooth hand/elbow/pelvis targets), a run
-file RUN.npz (its target/<task> arrays are replayed), or a mocap file once the motion pipeline
-provides a retargeter.
+file RUN.npz (its target/<task> arrays are replayed), or a mocap file (.bvh, .amc, .c3d)
+retargeted for each solver through the config's retarget: section.
 """
 
 

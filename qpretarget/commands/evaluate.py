@@ -37,7 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--pairs",
         nargs="+",
         metavar="LINK_A:LINK_B",
-        help="collision pairs to measure (default: the config's self-collision pairs)",
+        help="collision pairs to measure (default: the config's self-collision pairs, else 16 "
+        "upper-body pairs)",
     )
     p.add_argument("--safety-distance", type=float, help="safety distance [m] drawn and counted")
     p.add_argument(
