@@ -349,6 +349,11 @@ class Controller:
         return out
 
     @property
+    def level_impl(self) -> Any:
+        """The acceleration-level implementation (``None`` at velocity level)."""
+        return self._level_impl
+
+    @property
     def q(self) -> np.ndarray:
         """Current configuration (read-only view)."""
         q = self.state.q.view()

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from ..errors import ConfigError, TargetError
 from ..robot import RobotModel, RobotState
@@ -93,6 +94,11 @@ class ComTask(Task):
 
     def compute_jacobian(self, state: RobotState) -> np.ndarray:
         return state.com_jacobian()[self.rows]
+
+    def compute_jdot_v(self, state: RobotState) -> np.ndarray:
+        r"""CoM drift acceleration :math:`\dot J_{com} v` (needs ``forwardKinematics(q, v, 0)``)."""
+        pin.centerOfMass(state.model, state.data, pin.KinematicLevel.ACCELERATION, False)
+        return state.data.acom[0][self.rows].copy()
 
     def __repr__(self) -> str:
         return (
