@@ -228,7 +228,10 @@ def plot_joint_angles(
     for i in range(len(names), nrow * ncol):
         axes[i % nrow, i // nrow].set_axis_off()
     for c in range(ncol):
-        axes[-1, c].set_xlabel("time [s]")
+        used = [r for r in range(nrow) if c * nrow + r < len(names)]
+        if used:  # the lowest panel of each column carries the time axis
+            axes[used[-1], c].tick_params(labelbottom=True)
+            axes[used[-1], c].set_xlabel("time [s]")
     fig.suptitle("Joint angles and their limits")
     return _save(fig, Path(path))
 
