@@ -1,0 +1,429 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Calibration of a human motion to a robot: heading and position alignment, segment lengths.
+
+Nothing here is hand-tuned per clip. A :class:`Calibration` is computed once, from the first
+samples of the motion (a rest pose or the first frames) and from the robot model in its reference
+posture:
+
+* **Heading.** The human's initial heading :math:`\psi_h` is the yaw of the waist frame's x axis
+  when the motion has orientations, else the yaw of :math:`\hat y \times \hat z` with
+  :math:`\hat y` the direction from the right to the left hip (or shoulder). The robot's heading
+  :math:`\psi_r` is the yaw of its waist frame in the reference posture. Every human direction is
+  then rotated by :math:`R_a = R_z(\psi_r - \psi_h)`, so a clip that starts facing backwards
+  (180 degrees) is retargeted exactly like the same clip facing forwards.
+* **Position.** The human waist at calibration is mapped onto the robot waist of the reference
+  posture (horizontally), ankles onto ankles (vertically).
+* **Segments.** For every segment (child, parent) of the key-point tree present on both sides, the
+  human length :math:`\ell_h` (median over the calibration samples) and the robot length
+  :math:`\ell_r` (distance between the robot frames the two key-points map to, reference posture)
+  give the per-link scale :math:`s = \ell_r / \ell_h` of Dariush 2009 Sec. 3.
+
+The key-point tree (:data:`KEYPOINT_TREE`) is the skeleton of Dariush 2009 Fig. 2 extended to the
+legs: the waist is the root; the neck, both shoulders and both hips hang from the waist (the
+trunk, rigid on most robots, like Poubel 2014's mid-hip to mid-shoulder segment); the head hangs
+from the neck, each arm and leg from its shoulder or hip. The shoulders hang from the waist and
+not from the neck because "neck" means different points on different skeletons (the base of the
+neck on CMU data, the cervical joint on the human model, the middle of the shoulders on G1),
+while the waist-to-shoulder direction agrees within a few degrees (26 deg from vertical on CMU
+subject 14 and on G1). :func:`build_tree` keeps the key-points two sides share and hangs each on
+its nearest available ancestor.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .human_motion import MotionError
+
+#: Parent of each standard key-point (``None`` for the root), Dariush 2009 Fig. 2 plus the legs.
+KEYPOINT_TREE: dict[str, str | None] = {
+    "waist": None,
+    "neck": "waist",
+    "head": "neck",
+    "left_shoulder": "waist",
+    "left_elbow": "left_shoulder",
+    "left_wrist": "left_elbow",
+    "left_hand": "left_wrist",
+    "right_shoulder": "waist",
+    "right_elbow": "right_shoulder",
+    "right_wrist": "right_elbow",
+    "right_hand": "right_wrist",
+    "left_hip": "waist",
+    "left_knee": "left_hip",
+    "left_ankle": "left_knee",
+    "left_toe": "left_ankle",
+    "left_heel": "left_ankle",
+    "right_hip": "waist",
+    "right_knee": "right_hip",
+    "right_ankle": "right_knee",
+    "right_toe": "right_ankle",
+    "right_heel": "right_ankle",
+}
+
+#: Both feet: side -> (ankle, toe, hip, knee) key-point names.
+FEET: dict[str, dict[str, str]] = {
+    side: {
+        "ankle": f"{side}_ankle",
+        "toe": f"{side}_toe",
+        "heel": f"{side}_heel",
+        "hip": f"{side}_hip",
+        "knee": f"{side}_knee",
+    }
+    for side in ("left", "right")
+}
+
+
+class CalibrationError(MotionError, ValueError):
+    """The motion or the robot lacks what calibration needs (e.g. no waist, no valid sample)."""
+
+
+def build_tree(
+    available: Iterable[str], tree: Mapping[str, str | None] = KEYPOINT_TREE
+) -> dict[str, str | None]:
+    """Restrict a key-point tree to the available names, re-hanging orphans on their ancestors.
+
+    Args:
+        available: Key-points present on both the human and the robot.
+        tree: Parent table (child -> parent, ``None`` for the root).
+
+    Returns:
+        Child -> parent for every available key-point of ``tree``, in the order of ``tree``
+        (parents first); a key-point whose parent is missing hangs from the nearest available
+        ancestor, and one without any available ancestor becomes a root (parent ``None``).
+    """
+    present = set(available)
+    out: dict[str, str | None] = {}
+    for name, parent in tree.items():
+        if name not in present:
+            continue
+        while parent is not None and parent not in present:
+            parent = tree.get(parent)
+        out[name] = parent
+    return out
+
+
+def yaw_of(vector: npt.ArrayLike) -> float:
+    """Yaw [rad] of the horizontal part of a vector (``atan2(y, x)``)."""
+    v = np.asarray(vector, dtype=float)
+    return float(math.atan2(v[1], v[0]))
+
+
+def rotation_z(angle: float) -> np.ndarray:
+    """Rotation by ``angle`` [rad] about the world z axis, (3, 3)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def triad(left: np.ndarray, right: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    r"""A body frame from key-points: :math:`y` right to left, :math:`z` up, :math:`x = y \times z`.
+
+    :math:`\hat z` is the direction from ``lower`` to ``upper`` made orthogonal to :math:`\hat y`
+    (Gram-Schmidt), so the frame is exactly a rotation. Used for the waist (hips, waist -> neck) and
+    the torso (shoulders, waist -> neck) of marker data, which has no joint orientations.
+
+    Args:
+        left: ``(..., 3)`` positions of the left point (hip or shoulder).
+        right: ``(..., 3)`` positions of the right point.
+        lower: ``(..., 3)`` lower point of the up direction (waist).
+        upper: ``(..., 3)`` upper point of the up direction (neck).
+
+    Returns:
+        ``(..., 3, 3)`` rotations (columns x, y, z); NaN where an input is NaN or degenerate.
+    """
+    y = np.asarray(left, float) - np.asarray(right, float)
+    y = y / np.linalg.norm(y, axis=-1, keepdims=True)
+    up = np.asarray(upper, float) - np.asarray(lower, float)
+    z = up - np.sum(up * y, axis=-1, keepdims=True) * y
+    z = z / np.linalg.norm(z, axis=-1, keepdims=True)
+    x = np.cross(y, z)
+    return np.stack([x, y, z], axis=-1)
+
+
+def nearest_rotation(M: np.ndarray) -> np.ndarray:
+    """The rotation closest to ``M`` in Frobenius norm (polar factor by SVD), ``(..., 3, 3)``."""
+    U, _, Vt = np.linalg.svd(M)
+    d = np.sign(np.linalg.det(U @ Vt))
+    U = U.copy()
+    U[..., :, 2] *= d[..., None]
+    return U @ Vt
+
+
+def _median_length(a: np.ndarray, b: np.ndarray) -> float:
+    d = np.linalg.norm(np.atleast_2d(a) - np.atleast_2d(b), axis=-1)
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if d.size else math.nan
+
+
+def _first_valid(x: np.ndarray) -> np.ndarray:
+    """Mean of the finite rows of ``(N, 3)`` samples (NaN if none)."""
+    x = np.atleast_2d(np.asarray(x, float))
+    ok = np.all(np.isfinite(x), axis=-1)
+    return x[ok].mean(axis=0) if ok.any() else np.full(3, np.nan)
+
+
+@dataclass
+class Calibration:
+    r"""How a human motion maps onto a robot (see the module docstring).
+
+    Attributes:
+        tree: Key-point tree shared by the human and the robot (child -> parent).
+        yaw: Heading correction :math:`\psi_r - \psi_h` [rad].
+        rotation: :math:`R_a = R_z(\text{yaw})`, applied to every human direction.
+        human_waist: Human waist position at calibration [m], ``(3,)``.
+        robot_waist: Robot waist position in the reference posture [m], ``(3,)``.
+        human_ankle_height: Mean human ankle height at calibration [m].
+        robot_ankle_height: Mean robot ankle height in the reference posture [m].
+        human_lengths: Segment (child key-point) -> human length [m].
+        robot_lengths: Segment (child key-point) -> robot length [m].
+        robot_points: Robot key-points in the reference posture, name -> ``(3,)`` [m].
+        human_heading: :math:`\psi_h` [rad]; ``robot_heading``: :math:`\psi_r` [rad].
+        human_foot_yaw, robot_foot_yaw: Per side (``left``/``right``), the yaw of each foot at
+            calibration [rad] (human: ankle -> toe; robot: the sole frame's x axis).
+        double_support_ratio: :math:`L_r / L_h`, ratio of the mid-ankle to mid-hip distances of
+            the robot's reference posture and the human at calibration (Poubel 2014 Sec. III.A
+            double-support scaling).
+        notes: What calibration had to assume.
+    """
+
+    tree: dict[str, str | None]
+    yaw: float
+    rotation: np.ndarray
+    human_waist: np.ndarray
+    robot_waist: np.ndarray
+    human_ankle_height: float
+    robot_ankle_height: float
+    human_lengths: dict[str, float]
+    robot_lengths: dict[str, float]
+    robot_points: dict[str, np.ndarray]
+    human_heading: float = 0.0
+    robot_heading: float = 0.0
+    human_foot_yaw: dict[str, float] = field(default_factory=dict)
+    robot_foot_yaw: dict[str, float] = field(default_factory=dict)
+    double_support_ratio: float = 1.0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def scales(self) -> dict[str, float]:
+        r"""Per-link scales :math:`s = \ell_r / \ell_h` (Dariush 2009 Sec. 3), segment -> scale."""
+        return {
+            k: self.robot_lengths[k] / self.human_lengths[k]
+            for k in self.robot_lengths
+            if k in self.human_lengths and self.human_lengths[k] > 0
+        }
+
+    @property
+    def root_scale(self) -> float:
+        """Scale of the waist displacement: robot over human waist height above the ankles."""
+        h = float(self.human_waist[2] - self.human_ankle_height)
+        r = float(self.robot_waist[2] - self.robot_ankle_height)
+        return r / h if h > 1e-6 and math.isfinite(h) else 1.0
+
+    def align_direction(self, v: npt.ArrayLike) -> np.ndarray:
+        r"""Rotate human vectors ``(..., 3)`` by :math:`R_a` (heading alignment)."""
+        return np.asarray(v, float) @ self.rotation.T
+
+    def align_point(self, p: npt.ArrayLike) -> np.ndarray:
+        r"""Map human points ``(..., 3)`` rigidly onto the robot: :math:`R_a (p - w_h) + w_r`.
+
+        Horizontally the calibration waist lands on the robot waist; vertically the human ankles
+        land on the robot ankles.
+        """
+        p = np.asarray(p, float)
+        origin = np.array([self.human_waist[0], self.human_waist[1], self.human_ankle_height])
+        target = np.array([self.robot_waist[0], self.robot_waist[1], self.robot_ankle_height])
+        return (p - origin) @ self.rotation.T + target
+
+    def align_rotation(self, R: npt.ArrayLike) -> np.ndarray:
+        r"""Heading-aligned rotation :math:`R_a R` for world rotations ``(..., 3, 3)``."""
+        return self.rotation @ np.asarray(R, float)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serializable summary (stored in the run's ``meta``)."""
+        return {
+            "yaw_deg": math.degrees(self.yaw),
+            "human_heading_deg": math.degrees(self.human_heading),
+            "robot_heading_deg": math.degrees(self.robot_heading),
+            "human_waist": self.human_waist.round(6).tolist(),
+            "robot_waist": self.robot_waist.round(6).tolist(),
+            "human_lengths": {k: round(v, 6) for k, v in self.human_lengths.items()},
+            "robot_lengths": {k: round(v, 6) for k, v in self.robot_lengths.items()},
+            "scales": {k: round(v, 6) for k, v in self.scales.items()},
+            "root_scale": round(self.root_scale, 6),
+            "double_support_ratio": round(self.double_support_ratio, 6),
+            "tree": dict(self.tree),
+            "notes": list(self.notes),
+        }
+
+
+def calibrate(
+    human: Mapping[str, npt.ArrayLike],
+    robot: Mapping[str, npt.ArrayLike],
+    *,
+    human_waist_rotation: npt.ArrayLike | None = None,
+    robot_waist_rotation: npt.ArrayLike | None = None,
+    robot_foot_rotations: Mapping[str, npt.ArrayLike] | None = None,
+    tree: Mapping[str, str | None] = KEYPOINT_TREE,
+) -> Calibration:
+    """Compute the :class:`Calibration` of a human motion to a robot.
+
+    Args:
+        human: Human key-points at the calibration samples, name -> ``(N, 3)`` (or ``(3,)``)
+            positions [m] in the z-up world; NaN samples are ignored.
+        robot: Robot key-points in the reference posture, name -> ``(3,)`` [m].
+        human_waist_rotation: ``(N, 3, 3)`` or ``(3, 3)`` waist orientation of the human, if the
+            motion has orientations (the heading is then its x axis).
+        robot_waist_rotation: ``(3, 3)`` world rotation of the robot's waist frame.
+        robot_foot_rotations: side (``left``/``right``) -> ``(3, 3)`` sole rotation of the robot.
+        tree: Key-point tree (default :data:`KEYPOINT_TREE`).
+
+    Returns:
+        The calibration.
+
+    Raises:
+        CalibrationError: If the waist is missing on either side, or no calibration sample of the
+            human waist is valid.
+    """
+    notes: list[str] = []
+    human_pts = {k: _first_valid(np.asarray(v, float).reshape(-1, 3)) for k, v in human.items()}
+    robot_pts = {k: np.asarray(v, float).reshape(3) for k, v in robot.items()}
+    shared = [k for k in tree if k in human_pts and k in robot_pts]
+    if "waist" not in shared:
+        raise CalibrationError(
+            "calibration needs the 'waist' key-point on both the human (key-point map) and the "
+            f"robot (retarget.robot_keypoints); human has {sorted(human_pts)}, robot has "
+            f"{sorted(robot_pts)}"
+        )
+    if not np.all(np.isfinite(human_pts["waist"])):
+        raise CalibrationError(
+            "the human waist is missing (NaN) in every calibration sample; start the clip later "
+            "(--start) or raise retarget.calibration.frames"
+        )
+    kept_tree = build_tree(shared, tree)
+
+    # Lengths: median over the calibration samples (human), reference posture (robot).
+    human_lengths: dict[str, float] = {}
+    robot_lengths: dict[str, float] = {}
+    for child, parent in kept_tree.items():
+        if parent is None:
+            continue
+        lh = _median_length(np.asarray(human[child], float), np.asarray(human[parent], float))
+        if math.isfinite(lh):
+            human_lengths[child] = lh
+        robot_lengths[child] = float(np.linalg.norm(robot_pts[child] - robot_pts[parent]))
+
+    # Heading.
+    if human_waist_rotation is not None:
+        Rw = np.asarray(human_waist_rotation, float).reshape(-1, 3, 3)
+        ok = np.all(np.isfinite(Rw), axis=(1, 2))
+        human_heading = yaw_of(Rw[ok][0][:, 0]) if ok.any() else math.nan
+    else:
+        human_heading = math.nan
+    if not math.isfinite(human_heading):
+        human_heading = _heading_from_points(human_pts)
+        if not math.isfinite(human_heading):
+            human_heading = 0.0
+            notes.append("no waist orientation, hips or shoulders: human heading taken as 0")
+    if robot_waist_rotation is not None:
+        robot_heading = yaw_of(np.asarray(robot_waist_rotation, float)[:, 0])
+    else:
+        robot_heading = _heading_from_points(robot_pts)
+        if not math.isfinite(robot_heading):
+            robot_heading = 0.0
+    yaw = _wrap(robot_heading - human_heading)
+
+    # Heights.
+    def ankle_height(points: Mapping[str, np.ndarray]) -> float:
+        zs = [points[k][2] for k in ("left_ankle", "right_ankle") if k in points]
+        zs = [z for z in zs if math.isfinite(z)]
+        return float(np.mean(zs)) if zs else math.nan
+
+    h_ankle = ankle_height(human_pts)
+    r_ankle = ankle_height(robot_pts)
+    if not math.isfinite(h_ankle) or not math.isfinite(r_ankle):
+        # Upper-body data: keep the waist heights as they are (no vertical scaling reference).
+        notes.append("no ankles on both sides: waist heights are matched instead of ankles")
+        h_ankle = float(human_pts["waist"][2]) - float(robot_pts["waist"][2])
+        r_ankle = 0.0
+
+    # Feet yaw (human: ankle -> toe; robot: sole x axis).
+    human_foot_yaw: dict[str, float] = {}
+    robot_foot_yaw: dict[str, float] = {}
+    for side, names in FEET.items():
+        a, t = human_pts.get(names["ankle"]), human_pts.get(names["toe"])
+        if a is not None and t is not None and np.all(np.isfinite(t - a)):
+            human_foot_yaw[side] = yaw_of(t - a)
+        if robot_foot_rotations is not None and side in robot_foot_rotations:
+            robot_foot_yaw[side] = yaw_of(np.asarray(robot_foot_rotations[side], float)[:, 0])
+
+    # Double support (Poubel 2014 III.A): mid-ankle -> mid-hip distance ratio.
+    ratio = 1.0
+    needed = ("left_ankle", "right_ankle", "left_hip", "right_hip")
+    if all(k in human_pts and k in robot_pts for k in needed):
+        lh = float(
+            np.linalg.norm(
+                0.5 * (human_pts["left_hip"] + human_pts["right_hip"])
+                - 0.5 * (human_pts["left_ankle"] + human_pts["right_ankle"])
+            )
+        )
+        lr = float(
+            np.linalg.norm(
+                0.5 * (robot_pts["left_hip"] + robot_pts["right_hip"])
+                - 0.5 * (robot_pts["left_ankle"] + robot_pts["right_ankle"])
+            )
+        )
+        if math.isfinite(lh) and lh > 1e-6:
+            ratio = lr / lh
+    return Calibration(
+        tree=kept_tree,
+        yaw=yaw,
+        rotation=rotation_z(yaw),
+        human_waist=human_pts["waist"].copy(),
+        robot_waist=robot_pts["waist"].copy(),
+        human_ankle_height=h_ankle,
+        robot_ankle_height=r_ankle,
+        human_lengths=human_lengths,
+        robot_lengths=robot_lengths,
+        robot_points={k: robot_pts[k].copy() for k in kept_tree},
+        human_heading=human_heading,
+        robot_heading=robot_heading,
+        human_foot_yaw=human_foot_yaw,
+        robot_foot_yaw=robot_foot_yaw,
+        double_support_ratio=ratio,
+        notes=notes,
+    )
+
+
+def _heading_from_points(points: Mapping[str, np.ndarray]) -> float:
+    r"""Yaw of :math:`\hat y \times \hat z` with :math:`\hat y` from the right to the left hip."""
+    for left, right in (("left_hip", "right_hip"), ("left_shoulder", "right_shoulder")):
+        if left in points and right in points:
+            y = points[left] - points[right]
+            if np.all(np.isfinite(y)) and np.linalg.norm(y[:2]) > 1e-6:
+                forward = np.cross(y, [0.0, 0.0, 1.0])
+                return yaw_of(forward)
+    return math.nan
+
+
+def _wrap(angle: float) -> float:
+    """Angle wrapped to (-pi, pi]."""
+    return float(math.atan2(math.sin(angle), math.cos(angle)))
+
+
+__all__ = [
+    "FEET",
+    "KEYPOINT_TREE",
+    "Calibration",
+    "CalibrationError",
+    "build_tree",
+    "calibrate",
+    "nearest_rotation",
+    "rotation_z",
+    "triad",
+    "yaw_of",
+]
