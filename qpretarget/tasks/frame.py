@@ -14,6 +14,7 @@ orientation.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -41,7 +42,11 @@ _EYE3 = np.eye(3)
 
 def _is_rotation(R: np.ndarray) -> bool:
     """``R'R = I`` and ``det R = 1`` to 1e-3 (cheap enough for every tick)."""
-    return bool(np.abs(R.T @ R - _EYE3).max() < 1e-3 and abs(np.linalg.det(R) - 1.0) < 1e-3)
+    if np.abs(R.T @ R - _EYE3).max() >= 1e-3:
+        return False
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    return abs(det - 1.0) < 1e-3
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -143,8 +148,9 @@ class FrameTask(Task):
                 (or a position to an orientation-only task), on a matrix that is not a rotation.
         """
         if type(target) is np.ndarray and target.shape == (3,) and self.has_position:
-            # Fast path: a position array (the common case in a 100 Hz loop).
-            if not np.isfinite(target).all():
+            # Fast path: a position array (the common case in a 100 Hz loop); a NaN or inf
+            # anywhere makes the sum non-finite.
+            if not math.isfinite(sum(target.tolist())):
                 return False
             self._prev_position = self.position_target
             self.position_target = target.astype(float, copy=True)
@@ -188,7 +194,7 @@ class FrameTask(Task):
                 tick=tick,
             )
         for x in (position, rotation):
-            if x is not None and not np.all(np.isfinite(x)):
+            if x is not None and not np.isfinite(x).all():
                 return False
         if rotation is not None and not _is_rotation(rotation):
             raise TargetError(
