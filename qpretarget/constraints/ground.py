@@ -1,0 +1,272 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Ground and static obstacles: the velocity damper of :mod:`.self_collision` against the world.
+
+Chosen links (default: the feet, hands and knees of the robot's key-points) stay above the ground
+plane :math:`z = h` by a margin :math:`d_s`, and chosen links stay away from static obstacles
+(sphere, box, capsule, cylinder or half-space, placed in the world from YAML). Each (link, ground)
+and (link, obstacle) pair is a row of the same damper,
+
+.. math::
+    -\frac{\partial d}{\partial q} v \le \text{rate}\,(d - d_s) \quad \text{when } d < d_i,
+
+computed by the same :class:`~qpretarget.collision.CollisionModel` (convex hulls or capsules of
+the links; the ground is a coal half-space, so :math:`d` is the height of the link's lowest
+point). A link that touches the ground when the controller is reset (a standing foot) or that
+belongs to an active contact is taken as standing on it: its ground row is disarmed until the link
+rises above :math:`d_s` + ``arm_height`` (the contact constraint holds it; a second, conflicting
+constraint on it would only make the QP infeasible).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ..collision import CollisionModel, LinkShape, link_shapes, obstacle_shape
+from ..errors import ConfigError
+from ..robot import RobotModel, RobotState
+from .base import CONSTRAINTS
+from .self_collision import DistanceDamper, resolve_link
+
+#: Name of the ground body in pair names and reports.
+GROUND = "ground"
+#: Key-points constrained by default (each resolved to the link carrying its geometry).
+DEFAULT_KEYPOINTS = ("left_hand", "right_hand", "left_knee", "right_knee")
+
+
+@CONSTRAINTS.register("ground")
+class Ground(DistanceDamper):
+    r"""Keep links above the ground and away from static obstacles (velocity damper).
+
+    Args:
+        links: links (or key-points / frames, resolved to the link carrying their geometry) kept
+            above the ground; default the feet, hands and knees. ``[]`` for obstacles only.
+        height: ground height :math:`h` [m].
+        margin: :math:`d_s` for the ground [m].
+        obstacles: static obstacles, each ``{name, shape: sphere|box|capsule|cylinder|halfspace,
+            radius / size / length / normal+offset, position [m], rpy [rad] (or pose 4x4)}``.
+        obstacle_links: links kept away from the obstacles (default: every link with geometry).
+        obstacle_margin: :math:`d_s` for the obstacles [m] (default: ``margin``).
+        d_i: influence distance [m].
+        xi, gain, gain_per_tick: damper gain, one form (see :mod:`.self_collision`).
+        recovery_speed: largest separation speed asked of a link below :math:`d_s` [m/s].
+        arm_height: a standing link's ground row arms once it is this far above :math:`d_s` [m].
+        geometry: ``convex_hull`` or ``capsule``.
+        max_rows: cap on the QP rows (default one per pair).
+        broad_phase: skip pairs that provably stay beyond :math:`d_i`.
+        trust_region: tolerated linearization error [m] (see :mod:`.self_collision`).
+        name: constraint name.
+
+    Raises:
+        ConfigError: bad values or obstacles; UnknownNameError: unknown links.
+    """
+
+    importance = 75
+
+    def __init__(
+        self,
+        *,
+        links: Sequence[str] | None = None,
+        height: float = 0.0,
+        margin: float = 0.0,
+        obstacles: Sequence[Mapping[str, Any]] | None = None,
+        obstacle_links: Sequence[str] | None = None,
+        obstacle_margin: float | None = None,
+        d_i: float = 0.05,
+        xi: float | None = None,
+        gain: float | None = None,
+        gain_per_tick: float | None = None,
+        recovery_speed: float = 0.5,
+        arm_height: float = 0.01,
+        geometry: str = "convex_hull",
+        max_rows: int | None = None,
+        broad_phase: bool = True,
+        trust_region: float | None = 2e-4,
+        name: str | None = None,
+    ) -> None:
+        super().__init__(
+            d_s=margin, d_i=d_i, xi=xi, gain=gain, gain_per_tick=gain_per_tick,
+            recovery_speed=recovery_speed, geometry=geometry, max_rows=max_rows,
+            broad_phase=broad_phase, trust_region=trust_region, name=name,
+        )  # fmt: skip
+        if links is not None and (isinstance(links, str) or not isinstance(links, Sequence)):
+            raise ConfigError(f"links must be a list of link names, got {links!r}.")
+        if obstacles is not None and (
+            isinstance(obstacles, (str, Mapping)) or not isinstance(obstacles, Sequence)
+        ):
+            raise ConfigError(f"obstacles must be a list of mappings, got {obstacles!r}.")
+        if obstacle_links is not None and (
+            isinstance(obstacle_links, str) or not isinstance(obstacle_links, Sequence)
+        ):
+            raise ConfigError(
+                f"obstacle_links must be a list of link names, got {obstacle_links!r}."
+            )
+        for key, value in (("height", height), ("arm_height", arm_height)):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not np.isfinite(value)
+            ):
+                raise ConfigError(f"{key} must be a finite number [m], got {value!r}.")
+        self.height = float(height)
+        self.arm_height = float(arm_height)
+        if obstacle_margin is not None and (
+            isinstance(obstacle_margin, bool)
+            or not isinstance(obstacle_margin, (int, float))
+            or not obstacle_margin < self.d_i
+        ):
+            raise ConfigError(
+                f"obstacle_margin must be a number below d_i [m], got {obstacle_margin!r}."
+            )
+        self.obstacle_margin = self.d_s if obstacle_margin is None else float(obstacle_margin)
+        self._links_spec = None if links is None else [str(x) for x in links]
+        self._obstacles_spec = list(obstacles or [])
+        self._obstacle_links_spec = (
+            None if obstacle_links is None else [str(x) for x in obstacle_links]
+        )
+        self.links: list[str] = []
+        self.obstacles: list[LinkShape] = []
+        self._contacts: Any = None
+        self._contacts_version = -1
+
+    # ------------------------------------------------------------------ binding
+    def bind(self, robot: RobotModel, *, path: str = "") -> None:
+        super().bind(robot, path=path)
+        p = f"{path}." if path else ""
+        shapes = link_shapes(robot, self.geometry)
+        if self._links_spec is None:
+            names = [f.frame for f in robot.feet.values()]
+            names += [k for k in DEFAULT_KEYPOINTS if k in robot.keyframes]
+            specs = [(n, f"{p}links") for n in names]
+        else:
+            specs = [(n, f"{p}links[{k}]") for k, n in enumerate(self._links_spec)]
+        links: list[str] = []
+        for n, where in specs:
+            link = resolve_link(robot, shapes, n, where)
+            if link not in links:
+                links.append(link)
+        self.links = links
+        self.obstacles = [
+            obstacle_shape(spec, robot.model, path=f"{p}obstacles[{k}]")
+            for k, spec in enumerate(self._obstacles_spec)
+        ]
+        names = [o.name for o in self.obstacles]
+        if len(set(names)) != len(names) or GROUND in names:
+            raise ConfigError(
+                f"obstacle names must be unique and not {GROUND!r}, got {names}.",
+                path=f"{p}obstacles",
+            )
+        if self._obstacle_links_spec is None:
+            olinks = list(shapes) if self.obstacles else []
+        else:
+            olinks = []
+            for k, n in enumerate(self._obstacle_links_spec):
+                link = resolve_link(robot, shapes, n, f"{p}obstacle_links[{k}]")
+                if link not in olinks:
+                    olinks.append(link)
+        self.obstacle_links = olinks
+        ground = LinkShape(
+            GROUND, "halfspace", _halfspace(self.height), 0, 0, pin.SE3.Identity(), 0.0
+        )
+        pairs = [(link, GROUND) for link in links]
+        pairs += [(link, o.name) for o in self.obstacles for link in olinks]
+        if not pairs:
+            raise ConfigError("no link to constrain: give `links` or `obstacles`.", path=path)
+        self.pairs = pairs
+        self.n_ground = len(links)
+        self.model = CollisionModel(
+            robot, pairs, geometry=self.geometry, obstacles=[ground, *self.obstacles],
+            broad_phase=self.broad_phase, path=f"{p}links",
+        )  # fmt: skip
+        self.safety = np.array(
+            [self.d_s] * self.n_ground + [self.obstacle_margin] * (len(pairs) - self.n_ground)
+        )
+        self.armed = np.ones(len(pairs), dtype=bool)
+        self._setup_rows(robot)
+
+    def link(self, controller: Any) -> None:
+        """Find the contacts constraint (called once the controller is built)."""
+        for c in getattr(controller, "constraints", []):
+            if hasattr(c, "set_contacts") and hasattr(c, "frame_ids"):
+                self._contacts = c
+                return
+
+    def on_contacts_changed(self, contacts: Any, state: RobotState) -> None:
+        """The supporting feet changed: disarm the ground rows of the feet now in contact."""
+        self._contacts = contacts
+        self._disarm_contacts()
+
+    def _disarm_contacts(self) -> None:
+        c = self._contacts
+        if c is None or self.robot is None:
+            return
+        self._contacts_version = getattr(c, "version", -1)
+        active = set(getattr(c, "active_feet", []))
+        joints = {
+            self.robot.model.frames[fid].parentJoint
+            for n, fid in zip(c.names, c.frame_ids, strict=False)
+            if n in active
+        }
+        assert self.model is not None
+        for k in range(self.n_ground):
+            if self.model.shapes[self.model.bodies.index(self.pairs[k][0])].joint in joints:
+                self.armed[k] = False
+
+    def reset(self, state: RobotState) -> None:
+        super().reset(state)
+        assert self.model is not None
+        d = self.model.compute_all(state)[0]
+        self.armed[:] = True
+        self.armed[: self.n_ground] = d[: self.n_ground] >= self.d_s + self.arm_height
+        self._contacts_version = -1
+
+    # ------------------------------------------------------------------ per tick
+    def _row_mask(self, active: np.ndarray) -> np.ndarray:
+        model = self.model
+        assert model is not None
+        c = self._contacts
+        if c is not None and getattr(c, "version", -1) != self._contacts_version:
+            self._disarm_contacts()
+        ground = active < self.n_ground
+        if ground.any():
+            # Standing links re-arm once they are clearly above the ground.
+            d = model.distances[active]
+            rise = ground & ~self.armed[active] & (d >= self.d_s + self.arm_height)
+            if rise.any():
+                self.armed[active[rise]] = True
+        # Links far above the ground (not active) are re-armed too.
+        far = np.flatnonzero(~self.armed[: self.n_ground])
+        if far.size:
+            gone = model.distances[far] >= self.d_s + self.arm_height
+            self.armed[far[gone]] = True
+        return self.armed[active]
+
+    def describe(self) -> list[str]:
+        """Lines for ``qpretarget info``."""
+        lines = [
+            f"ground z = {self.height} m, margin {self.d_s} m, d_i={self.d_i} m, "
+            f"{self.gain_form}={self.gain_value}: {', '.join(self.links) or '-'}"
+        ]
+        for o in self.obstacles:
+            lines.append(
+                f"obstacle {o.name} ({o.kind}) at {np.round(o.placement.translation, 3).tolist()}, "
+                f"margin {self.obstacle_margin} m, vs {len(self.obstacle_links)} links"
+            )
+        lines.append(f"{len(self.pairs)} pairs, {self.n_rows} QP rows")
+        return lines
+
+    def __repr__(self) -> str:
+        return (
+            f"Ground(links={self.links or self._links_spec}, height={self.height}, "
+            f"margin={self.d_s}, obstacles={[o.get('name') for o in self._obstacles_spec]}, "
+            f"name={self.name!r})"
+        )
+
+
+def _halfspace(height: float) -> Any:
+    """The solid ground ``{x : z <= height}`` as a coal half-space (``{x : n'x <= d}``)."""
+    return coal.Halfspace(np.array([0.0, 0.0, 1.0]), float(height))

@@ -1,0 +1,556 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Self-collision avoidance: linearized distance constraints (velocity damper, DESIGN.md).
+
+For every pair of links :math:`(a, b)` closer than the influence distance :math:`d_i`, with
+distance :math:`d`, witness points :math:`p_a, p_b` and unit normal :math:`n` from :math:`a` to
+:math:`b` (:mod:`qpretarget.collision`), the distance may not decrease faster than the damper
+allows:
+
+.. math::
+    \dot d = n^\top \big(J_b(p_b) - J_a(p_a)\big) v \;\ge\; -\xi \frac{d - d_s}{d_i - d_s}
+    \quad\Longleftrightarrow\quad
+    n^\top \big(J_a(p_a) - J_b(p_b)\big) v \;\le\; \xi \frac{d - d_s}{d_i - d_s},
+
+with :math:`d_s` the safety distance and :math:`\xi` [m/s] the approach speed allowed at
+:math:`d_i` (Faverjon & Tournassoud's damper, as in DESIGN.md "One tick"). The gain can also be
+given per second (``gain``: bound :math:`k (d - d_s)`) or per tick (``gain_per_tick``: bound
+:math:`\gamma (d - d_s)/dt`, i.e. the gap to :math:`d_s` shrinks by at most the fraction
+:math:`\gamma` per tick to first order). Below :math:`d_s` the bound is negative: the pair is
+pushed apart, at most at ``recovery_speed``.
+
+The block has one row per pair (or ``max_rows`` rows given to the closest pairs); rows of pairs
+beyond :math:`d_i` are zero with infinite bounds, so the QP keeps its shape and the solver stays
+warm. The importance is 70: when hard constraints conflict, collisions give before contacts and
+joint limits (see :mod:`qpretarget.relaxation`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from ..collision import GEOMETRIES, CollisionModel, LinkShape, adjacent_links, link_shapes
+from ..errors import ConfigError, UnknownNameError
+from ..robot import RobotModel, RobotState
+from ..validation import positive_float
+from .base import CONSTRAINTS, Constraint, ConstraintBlock
+
+#: QP rows of an ``auto`` pair set unless ``max_rows`` says otherwise.
+AUTO_MAX_ROWS = 24
+
+
+def damper_rate(
+    *,
+    xi: float | None,
+    gain: float | None,
+    gain_per_tick: float | None,
+    d_s: float,
+    d_i: float,
+    default_per_tick: float = 0.5,
+) -> tuple[str, float]:
+    """Validate the damper gain given in one of three forms; return ``(form, value)``.
+
+    Raises:
+        ConfigError: more than one form given, or a value out of range.
+    """
+    given = [(k, v) for k, v in (("xi", xi), ("gain", gain), ("gain_per_tick", gain_per_tick))
+             if v is not None]  # fmt: skip
+    if len(given) > 1:
+        raise ConfigError(
+            "give one of xi [m/s], gain [1/s] or gain_per_tick, got "
+            f"{', '.join(k for k, _ in given)}."
+        )
+    if not given:
+        return "gain_per_tick", default_per_tick
+    form, value = given[0]
+    value = positive_float(value, form)
+    if form == "gain_per_tick" and value > 1:
+        raise ConfigError(
+            f"gain_per_tick must be in (0, 1] (fraction of the gap to d_s closed per tick), "
+            f"got {value}."
+        )
+    if form == "xi" and not np.isfinite(d_i - d_s):
+        raise ConfigError("xi needs a finite influence distance d_i.")
+    return form, value
+
+
+def resolve_link(robot: RobotModel, shapes: dict[str, LinkShape], name: str, path: str) -> str:
+    """A link, key-point or frame name -> the link (with collision geometry) that carries it.
+
+    Raises:
+        UnknownNameError: listing the links with collision geometry.
+    """
+    if name in shapes:
+        return name
+    frame = robot.keyframes.get(name, name)
+    if frame in shapes:
+        return frame
+    if robot.model.existFrame(frame):
+        joint = robot.model.frames[robot.model.getFrameId(frame)].parentJoint
+        links = [n for n, s in shapes.items() if s.joint == joint]
+        if len(links) == 1:
+            return links[0]
+    raise UnknownNameError(
+        "collision link", name, list(shapes), path=path,
+        fix=f"Links with collision geometry: {', '.join(shapes)}.",
+    )  # fmt: skip
+
+
+class DistanceDamper(Constraint):
+    """Base of the distance constraints: the velocity damper on a :class:`CollisionModel`.
+
+    Subclasses build :attr:`model` (and :attr:`pairs`, :attr:`safety`, one safety distance per
+    pair) in :meth:`bind`, then call :meth:`_setup_rows`.
+    """
+
+    def __init__(
+        self,
+        *,
+        d_s: float,
+        d_i: float,
+        xi: float | None,
+        gain: float | None,
+        gain_per_tick: float | None,
+        recovery_speed: float,
+        geometry: str,
+        max_rows: int | None,
+        broad_phase: bool,
+        trust_region: float | None,
+        name: str | None,
+    ) -> None:
+        super().__init__(name)
+        self.trust_region = (
+            None if trust_region is None else positive_float(trust_region, "trust_region [m]")
+        )
+        self.d_s = (
+            float(d_s) if isinstance(d_s, (int, float)) and not isinstance(d_s, bool) else d_s
+        )
+        if not isinstance(self.d_s, float) or not np.isfinite(self.d_s):
+            raise ConfigError(f"d_s must be a finite number [m], got {d_s!r}.")
+        self.d_i = positive_float(d_i, "d_i [m]")
+        if self.d_i <= self.d_s:
+            raise ConfigError(
+                f"the influence distance d_i ({self.d_i}) must be larger than the safety distance "
+                f"d_s ({self.d_s})."
+            )
+        self.gain_form, self.gain_value = damper_rate(
+            xi=xi, gain=gain, gain_per_tick=gain_per_tick, d_s=self.d_s, d_i=self.d_i
+        )
+        self.recovery_speed = positive_float(recovery_speed, "recovery_speed [m/s]")
+        if geometry not in GEOMETRIES:
+            raise ConfigError(f"geometry must be one of {', '.join(GEOMETRIES)}, got {geometry!r}.")
+        self.geometry = geometry
+        if max_rows is not None and (
+            isinstance(max_rows, bool) or not isinstance(max_rows, int) or max_rows < 1
+        ):
+            raise ConfigError(f"max_rows must be a positive integer or null, got {max_rows!r}.")
+        self.max_rows = max_rows
+        self.broad_phase = bool(broad_phase)
+        self.model: CollisionModel | None = None
+        self.pairs: list[tuple[str, str]] = []
+        self.safety = np.zeros(0)
+        #: Time spent in the last :meth:`compute_rows` [s] (distances + rows).
+        self.last_time = 0.0
+        #: Smallest pair distance seen at the last tick [m] (``inf`` if no pair was close).
+        self.min_distance = np.inf
+        #: Pairs closer than their safety distance at the last tick: ``"a/b"`` -> depth [m].
+        self.violations: dict[str, float] = {}
+        self._cache_key: tuple[int, int] | None = None
+
+    # ------------------------------------------------------------------ setup
+    def _setup_rows(self, robot: RobotModel) -> None:
+        P = len(self.pairs)
+        self.n_rows = P if self.max_rows is None else min(self.max_rows, P)
+        self._C = np.zeros((self.n_rows, robot.nv))
+        self._l = np.full(self.n_rows, -np.inf)
+        self._u = np.full(self.n_rows, np.inf)
+        self._grad = np.zeros((P, robot.nv))
+        self._tr_lb = np.full(robot.nv, -np.inf)
+        self._tr_ub = np.full(robot.nv, np.inf)
+        self._scale = np.ones(P)
+        self._pred_pairs = np.zeros(0, dtype=int)
+        self._pred = np.zeros(0)
+        self._last_rows = np.zeros(0, dtype=int)
+        self._last_pairs = np.zeros(0, dtype=int)
+
+    def rate(self, dt: float) -> float:
+        """Damper slope [1/s]: the bound is ``rate * (d - d_s)``."""
+        if self.gain_form == "gain_per_tick":
+            return self.gain_value / dt
+        if self.gain_form == "gain":
+            return self.gain_value
+        return self.gain_value / (self.d_i - self.d_s)
+
+    def reset(self, state: RobotState) -> None:
+        if self.model is not None:
+            self.model.invalidate()
+        self._cache_key = None
+        self._scale.fill(1.0)
+        self._pred_pairs = np.zeros(0, dtype=int)
+
+    def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
+        """Remember the first-order prediction of the active pairs' next distances."""
+        model = self.model
+        if self.trust_region is None or model is None or model.active.size == 0:
+            self._pred_pairs = np.zeros(0, dtype=int)
+            return
+        self._pred_pairs = model.active.copy()
+        self._pred = model.distances[self._pred_pairs] + (self._active_grad @ v) * dt
+
+    def _row_mask(self, active: np.ndarray) -> np.ndarray:
+        """Which active pairs get a row this tick (all of them unless a subclass disarms some)."""
+        return np.ones(active.size, dtype=bool)
+
+    # ------------------------------------------------------------------ per tick
+    def _update(self, state: RobotState) -> None:
+        """Distances and gradients of this tick, computed once per state/configuration."""
+        key = (id(state), id(state.q))
+        if key == self._cache_key and np.array_equal(self._q_cached, state.q):
+            return
+        model = self.model
+        assert model is not None
+        model.update(state, self.d_i)
+        self._active_grad = model.gradients(state)
+        self._cache_key = key
+        self._q_cached = state.q.copy()
+        if self._pred_pairs.size:  # adapt the trust region to last tick's prediction error
+            pairs = self._pred_pairs
+            err = model.distances[pairs] - self._pred
+            ok = model.exact[pairs]
+            bad = ok & (err < -self.trust_region)
+            good = ok & ~bad
+            self._scale[pairs[bad]] = np.maximum(self._scale[pairs[bad]] * 0.5, 1.0 / 256)
+            self._scale[pairs[good]] = np.minimum(self._scale[pairs[good]] * 1.25, 1.0)
+            self._pred_pairs = np.zeros(0, dtype=int)
+
+    def compute_bounds(self, state: RobotState, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
+        r"""Trust region of the linearization: bounded rotation per tick near a close pair.
+
+        The rows are first-order in :math:`v\,dt`; a rotation :math:`\Delta\theta_j` moves a
+        point at lever :math:`r` off its tangent by up to :math:`r \Delta\theta_j^2/2`. While a
+        pair :math:`p` is within :math:`d_i`, every rotational coordinate moving one of its
+        bodies is bounded by :math:`|v_j|\,dt \le \sqrt{2 s_p \varepsilon / r_{pj}}`,
+        :math:`\varepsilon` = ``trust_region`` [m] (translations are exact and free). As in a
+        trust-region SQP, the scale :math:`s_p \in [1/256, 1]` halves after a tick whose
+        first-order prediction of :math:`d_p` was optimistic by more than :math:`\varepsilon`
+        (witness points jumping between facets of the hulls) and grows back by 1.25 after an
+        accurate one. Far from the speeds of a tracking motion (G1 arm, :math:`\varepsilon` =
+        0.2 mm: 2-6 rad/s), it stops the two-tick oscillations that full-error-correction tasks
+        start against active rows, and with them the violations of :math:`d_s`.
+        """
+        if self.trust_region is None:
+            return None
+        self._update(state)
+        model = self.model
+        assert model is not None
+        act = model.active
+        if act.size == 0:
+            return None
+        r = model.pair_levers(act)  # (k, nv)
+        with np.errstate(divide="ignore"):
+            b = np.sqrt((2.0 * self.trust_region) * self._scale[act, None] / r)  # inf where r = 0
+        ub = self._tr_ub
+        np.divide(b.min(axis=0), dt, out=ub)
+        np.negative(ub, out=self._tr_lb)
+        return self._tr_lb, ub
+
+    def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
+        t0 = time.perf_counter()
+        self._update(state)
+        model = self.model
+        assert model is not None
+        C, lo, hi = self._C, self._l, self._u
+        if self._last_rows.size:  # clear last tick's rows only
+            C[self._last_rows] = 0.0
+            hi[self._last_rows] = np.inf
+        act = model.active
+        d = model.distances
+        self.violations = {}
+        if act.size:
+            da = d[act]
+            self.min_distance = float(da.min())
+            keep = self._row_mask(act)
+            sel = np.flatnonzero(keep)
+            pairs = act[sel]
+            if self.max_rows is not None and pairs.size > self.n_rows:
+                closest = np.argsort(da[sel] - self.safety[pairs], kind="stable")[: self.n_rows]
+                sel = np.sort(sel[closest])
+                pairs = act[sel]
+            rows = pairs if self.max_rows is None else np.arange(pairs.size)
+            gap = d[pairs] - self.safety[pairs]
+            C[rows] = -self._active_grad[sel]
+            hi[rows] = np.maximum(self.rate(dt) * gap, -self.recovery_speed)
+            self._last_rows = rows
+            self._last_pairs = pairs
+            bad = da < self.safety[act]
+            if bad.any():
+                for i in np.flatnonzero(bad).tolist():
+                    a, b = self.pairs[act[i]]
+                    self.violations[f"{a}/{b}"] = float(self.safety[act[i]] - da[i])
+        else:
+            self.min_distance = float(d.min()) if d.size else np.inf
+            self._last_rows = self._last_pairs = np.zeros(0, dtype=int)
+        self.last_time = time.perf_counter() - t0
+        return ConstraintBlock(self.name, C, lo, hi)
+
+    def distances_and_gradients(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
+        r"""Pair distances and their gradients :math:`\partial d/\partial q` for this tick.
+
+        Computed once per tick and shared with :meth:`compute_rows` (for the CRAC collision
+        weights, CRAC eq. 22-27).
+
+        Returns:
+            ``(d (P,), grad (P, nv))``: exact distances of the pairs closer than :math:`d_i`
+            (lower bounds :math:`\ge d_i` for the others, whose gradient rows are zero).
+        """
+        self._update(state)
+        model = self.model
+        assert model is not None
+        grad = self._grad
+        grad.fill(0.0)
+        if model.active.size:
+            grad[model.active] = self._active_grad
+        return model.distances.copy(), grad
+
+    @property
+    def safety_distance(self) -> float:
+        """Safety distance :math:`d_s` [m] (used by :mod:`qpretarget.metrics`)."""
+        return self.d_s
+
+
+@CONSTRAINTS.register("self_collision")
+class SelfCollision(DistanceDamper):
+    r"""Keep link pairs at least :math:`d_s` apart (velocity damper, module docstring).
+
+    Args:
+        pairs: ``auto`` or a list of ``[link_a, link_b]`` (URDF link names with collision
+            geometry; key-point names such as ``left_hand`` are resolved to their link).
+        d_s: safety distance [m].
+        d_i: influence distance [m]; pairs farther apart have no active row (and are not even
+            computed when the broad phase proves it).
+        xi: damper speed [m/s] at :math:`d_i` (DESIGN.md form); or
+        gain: slope [1/s] of the bound :math:`k (d - d_s)`; or
+        gain_per_tick: fraction of the gap to :math:`d_s` that may close per tick (default 0.5).
+        recovery_speed: largest separation speed asked of a pair closer than :math:`d_s` [m/s].
+        geometry: ``convex_hull`` or ``capsule`` (:mod:`qpretarget.collision`).
+        links: ``auto`` only: restrict the candidate links to these (default: every link with
+            collision geometry).
+        exclude: pairs removed from the list (``auto`` or explicit).
+        touch_distance: ``auto`` only: pairs closer than this in the reference posture are left
+            out as touching [m].
+        use_srdf: ``auto`` only: leave out the pairs the robot's SRDF disables.
+        max_rows: number of QP rows; the closest active pairs get them. Default: one row per
+            pair for a listed pair set, :data:`AUTO_MAX_ROWS` for ``auto`` (hundreds of pairs).
+        broad_phase: skip pairs that provably stay beyond :math:`d_i` (conservative).
+        trust_region: tolerated second-order error of the linearization [m]: while a pair is
+            within :math:`d_i` the rotations moving its links are bounded per tick
+            (:meth:`DistanceDamper.compute_bounds`); ``null`` turns the bound off.
+        name: constraint name.
+
+    Raises:
+        ConfigError: bad values; UnknownNameError: a link without collision geometry.
+    """
+
+    importance = 70
+
+    def __init__(
+        self,
+        *,
+        pairs: str | Sequence[Sequence[str]] = "auto",
+        d_s: float = 0.02,
+        d_i: float = 0.08,
+        xi: float | None = None,
+        gain: float | None = None,
+        gain_per_tick: float | None = None,
+        recovery_speed: float = 0.5,
+        geometry: str = "convex_hull",
+        links: Sequence[str] | None = None,
+        exclude: Sequence[Sequence[str]] | None = None,
+        touch_distance: float = 0.005,
+        use_srdf: bool = True,
+        max_rows: int | None = None,
+        broad_phase: bool = True,
+        trust_region: float | None = 2e-4,
+        name: str | None = None,
+    ) -> None:
+        super().__init__(
+            d_s=d_s, d_i=d_i, xi=xi, gain=gain, gain_per_tick=gain_per_tick,
+            recovery_speed=recovery_speed, geometry=geometry, max_rows=max_rows,
+            broad_phase=broad_phase, trust_region=trust_region, name=name,
+        )  # fmt: skip
+        if isinstance(pairs, str):
+            if pairs != "auto":
+                raise ConfigError(
+                    f"pairs must be 'auto' or a list of [link_a, link_b], got {pairs!r}."
+                )
+        elif not isinstance(pairs, Sequence) or not all(
+            isinstance(p, Sequence) and not isinstance(p, str) and len(p) == 2 for p in pairs
+        ):
+            raise ConfigError(f"pairs must be 'auto' or a list of [link_a, link_b], got {pairs!r}.")
+        elif len(pairs) == 0:
+            raise ConfigError("pairs is an empty list: give pairs or 'auto'.")
+        if links is not None and pairs != "auto":
+            raise ConfigError(
+                "`links` selects candidates for pairs: auto; drop it with a pair list."
+            )
+        self._pairs_spec = pairs
+        self._links_spec = None if links is None else [str(x) for x in links]
+        self._exclude = [tuple(str(x) for x in p) for p in (exclude or [])]
+        if any(len(p) != 2 for p in self._exclude):
+            raise ConfigError(f"exclude must be a list of [link_a, link_b], got {exclude!r}.")
+        self.touch_distance = float(touch_distance)
+        self.use_srdf = bool(use_srdf)
+        #: Why candidate pairs were left out: reason -> list of pairs.
+        self.left_out: dict[str, list[tuple[str, str]]] = {}
+        #: Warnings about kept pairs (explicit lists: adjacent or touching at the reference).
+        self.notes: list[str] = []
+
+    # ------------------------------------------------------------------ binding
+    def bind(self, robot: RobotModel, *, path: str = "") -> None:
+        super().bind(robot, path=path)
+        p = f"{path}." if path else ""
+        shapes = link_shapes(robot, self.geometry)
+        exclude = {
+            frozenset(resolve_link(robot, shapes, x, f"{p}exclude[{k}]") for x in pair)
+            for k, pair in enumerate(self._exclude)
+        }
+        self.left_out = {}
+        self.notes = []
+        if self._pairs_spec == "auto":
+            pairs = self._auto_pairs(robot, shapes, exclude, p)
+        else:
+            pairs = []
+            seen: set[frozenset[str]] = set()
+            for k, pair in enumerate(self._pairs_spec):
+                a, b = (
+                    resolve_link(robot, shapes, str(x), f"{p}pairs[{k}][{i}]")
+                    for i, x in enumerate(pair)
+                )
+                key = frozenset((a, b))
+                if a == b:
+                    raise ConfigError(
+                        f"pair [{a}, {b}] names the same link twice.", path=f"{p}pairs[{k}]"
+                    )
+                if key in seen:
+                    raise ConfigError(f"pair [{a}, {b}] is listed twice.", path=f"{p}pairs[{k}]")
+                seen.add(key)
+                if key in exclude:
+                    self.left_out.setdefault("excluded in YAML", []).append((a, b))
+                    continue
+                if adjacent_links(robot, a, b, shapes):
+                    self.notes.append(
+                        f"pair {a}/{b} is adjacent (parent/child joint): kept as listed"
+                    )
+                pairs.append((a, b))
+        if not pairs:
+            raise ConfigError("no collision pair is left after the exclusions.", path=f"{p}pairs")
+        self.pairs = pairs
+        if self.max_rows is None and self._pairs_spec == "auto":
+            self.max_rows = AUTO_MAX_ROWS
+        self.model = CollisionModel(
+            robot, pairs, geometry=self.geometry, broad_phase=self.broad_phase, path=f"{p}pairs"
+        )
+        self.safety = np.full(len(pairs), self.d_s)
+        # Distances in the reference posture (reported by describe()).
+        state = RobotState(robot)
+        self.reference_distances = self.model.compute_all(state)[0]
+        if self._pairs_spec != "auto":
+            for (a, b), d in zip(pairs, self.reference_distances, strict=True):
+                if d < self.d_s:
+                    self.notes.append(
+                        f"pair {a}/{b} is {d * 1000:.1f} mm apart in the reference posture "
+                        f"(< d_s = {self.d_s * 1000:.0f} mm): it is pushed apart from the start"
+                    )
+        self._setup_rows(robot)
+
+    def _auto_pairs(
+        self,
+        robot: RobotModel,
+        shapes: dict[str, LinkShape],
+        exclude: set[frozenset[str]],
+        p: str,
+    ) -> list[tuple[str, str]]:
+        """All link pairs minus adjacent, SRDF-disabled, excluded and touching ones (in order)."""
+        if self._links_spec is not None:
+            links = []
+            for k, name in enumerate(self._links_spec):
+                link = resolve_link(robot, shapes, name, f"{p}links[{k}]")
+                if link not in links:
+                    links.append(link)
+        else:
+            links = list(shapes)  # URDF geometry order: deterministic
+        candidates = [(a, b) for i, a in enumerate(links) for b in links[i + 1 :]]
+        kept = []
+        for a, b in candidates:
+            if adjacent_links(robot, a, b, shapes):
+                self.left_out.setdefault("adjacent links (same or parent/child joint)", []).append(
+                    (a, b)
+                )
+            elif frozenset((a, b)) in exclude:
+                self.left_out.setdefault("excluded in YAML", []).append((a, b))
+            else:
+                kept.append((a, b))
+        if self.use_srdf and robot.srdf_path is not None and kept:
+            gm = pin.GeometryModel()
+            index = {}
+            for link in links:
+                index[link] = gm.addGeometryObject(shapes[link].geometry_object())
+            for a, b in kept:
+                gm.addCollisionPair(pin.CollisionPair(index[a], index[b]))
+            pin.removeCollisionPairs(robot.model, gm, str(robot.srdf_path), False)
+            names = {i: n for n, i in index.items()}
+            remaining = {frozenset((names[cp.first], names[cp.second])) for cp in gm.collisionPairs}
+            disabled = [pr for pr in kept if frozenset(pr) not in remaining]
+            if disabled:
+                self.left_out[f"disabled by the SRDF ({robot.srdf_path.name})"] = disabled
+            kept = [pr for pr in kept if frozenset(pr) in remaining]
+        if kept:
+            cm = CollisionModel(robot, kept, geometry=self.geometry, broad_phase=False)
+            d = cm.compute_all(RobotState(robot))[0]
+            touching = [pr for pr, di in zip(kept, d, strict=True) if di < self.touch_distance]
+            if touching:
+                self.left_out[
+                    f"touching in the reference posture (d < {self.touch_distance * 1000:.0f} mm)"
+                ] = touching
+            kept = [pr for pr, di in zip(kept, d, strict=True) if di >= self.touch_distance]
+        return kept
+
+    # ------------------------------------------------------------------ reporting
+    def describe(self) -> list[str]:
+        """Lines for ``qpretarget info``: the pairs kept and why the others were left out."""
+        model = self.model
+        src = "auto" if self._pairs_spec == "auto" else "listed"
+        lines = [
+            f"{len(self.pairs)} pairs ({src}), geometry {self.geometry}, d_s={self.d_s} m, "
+            f"d_i={self.d_i} m, {self.gain_form}={self.gain_value}, {self.n_rows} QP rows",
+        ]
+        if model is not None:
+            kinds: dict[str, int] = {}
+            for s in model.shapes:
+                kinds[s.kind] = kinds.get(s.kind, 0) + 1
+            lines.append(
+                f"bodies: {len(model.bodies)} ("
+                + ", ".join(f"{v} {k}" for k, v in sorted(kinds.items()))
+                + ")"
+            )
+        ref = getattr(self, "reference_distances", None)
+        for k, (a, b) in enumerate(self.pairs):
+            dist = f"  {ref[k] * 1000:7.1f} mm at reference" if ref is not None else ""
+            lines.append(f"  keep {a} / {b}{dist}")
+        for reason, prs in self.left_out.items():
+            examples = ", ".join(f"{a}/{b}" for a, b in prs[:3])
+            more = f" (+{len(prs) - 3} more)" if len(prs) > 3 else ""
+            lines.append(f"left out: {len(prs)} {reason}: {examples}{more}")
+        lines.extend(f"note: {n}" for n in self.notes)
+        return lines
+
+    def __repr__(self) -> str:
+        src = "auto" if self._pairs_spec == "auto" else f"{len(self._pairs_spec)} listed"
+        return (
+            f"SelfCollision(pairs={src}, d_s={self.d_s}, d_i={self.d_i}, "
+            f"{self.gain_form}={self.gain_value}, geometry={self.geometry!r}, "
+            f"name={self.name!r})"
+        )

@@ -1,0 +1,231 @@
+# SPDX-License-Identifier: Apache-2.0
+"""self_collision: damper rows, auto pair selection, acceptance (hands through the body), recovery."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from qpretarget.collision import CollisionModel
+from qpretarget.constraints.self_collision import SelfCollision
+from qpretarget.controller import Controller
+from qpretarget.errors import ConfigError, UnknownNameError
+from qpretarget.robot import RobotModel, RobotState
+
+#: The workload's 20 G1 pairs: hands/forearms/elbows vs torso, pelvis, thighs, head; hand vs hand.
+PAIRS = [
+    ["left_wrist_yaw_link", "torso_link"], ["right_wrist_yaw_link", "torso_link"],
+    ["left_wrist_yaw_link", "pelvis_contour_link"], ["right_wrist_yaw_link", "pelvis_contour_link"],
+    ["left_wrist_yaw_link", "left_hip_yaw_link"], ["right_wrist_yaw_link", "right_hip_yaw_link"],
+    ["left_wrist_yaw_link", "right_hip_yaw_link"], ["right_wrist_yaw_link", "left_hip_yaw_link"],
+    ["left_wrist_roll_link", "torso_link"], ["right_wrist_roll_link", "torso_link"],
+    ["left_elbow_link", "torso_link"], ["right_elbow_link", "torso_link"],
+    ["left_wrist_roll_link", "pelvis_contour_link"], ["right_wrist_roll_link", "pelvis_contour_link"],
+    ["left_wrist_yaw_link", "right_wrist_yaw_link"], ["left_wrist_roll_link", "right_wrist_roll_link"],
+    ["left_wrist_yaw_link", "right_wrist_roll_link"], ["right_wrist_yaw_link", "left_wrist_roll_link"],
+    ["left_wrist_yaw_link", "head_link"], ["right_wrist_yaw_link", "head_link"],
+]  # fmt: skip
+D_S, D_I = 0.03, 0.10
+
+
+@pytest.fixture(scope="module")
+def g1() -> RobotModel:
+    return RobotModel.from_name("g1")
+
+
+def config(with_collision: bool) -> dict:
+    """Feet held by contacts, pelvis and torso held, hands tracked (gain 20/s), posture."""
+    cons = [
+        {"type": "contacts"},
+        {"type": "joint_limits", "gain": 0.95},
+        {"type": "velocity_limits"},
+    ]
+    if with_collision:
+        cons.append({"type": "self_collision", "pairs": PAIRS, "d_s": D_S, "d_i": D_I})
+    return {
+        "robot": "g1",
+        "dt": 0.01,
+        "regularization": {"type": "identity", "damping": 0.05},
+        "tasks": [
+            {"type": "frame", "name": "pelvis", "frame": "pelvis", "mode": "pose",
+             "position_weight": 100.0, "orientation_weight": 100.0},
+            {"type": "frame", "name": "torso", "frame": "torso_link", "mode": "orientation",
+             "orientation_weight": 100.0},
+            {"type": "frame", "name": "left_hand", "frame": "left_rubber_hand", "mode": "position",
+             "position_weight": 100.0, "gain": 20.0},
+            {"type": "frame", "name": "right_hand", "frame": "right_rubber_hand",
+             "mode": "position", "position_weight": 100.0, "gain": 20.0},
+            {"type": "posture", "name": "posture", "weight": 0.1},
+        ],
+        "constraints": cons,
+    }  # fmt: skip
+
+
+def hands_through_body(ctrl: Controller, n: int = 150):
+    """Targets: left hand straight through the torso, then the two hands through each other."""
+    st = ctrl.state
+    robot = ctrl.robot
+    torso = st.frame_placement(robot.frame_id("torso_link")).translation.copy()
+    lh = st.frame_placement(robot.frame_id("left_rubber_hand")).translation.copy()
+    rh = st.frame_placement(robot.frame_id("right_rubber_hand")).translation.copy()
+    through = torso + np.array([0.0, -0.2, 0.05])  # right of the torso: the path crosses it
+    front_l = torso + np.array([0.25, 0.05, 0.05])
+    front_r = torso + np.array([0.25, -0.05, 0.05])
+    for k in range(n):  # phase 1: left hand through the torso, right hand stays
+        s = 0.5 - 0.5 * np.cos(np.pi * k / (n - 1))
+        yield {"left_hand": (1 - s) * lh + s * through, "right_hand": rh}
+    for k in range(n):  # phase 2: both hands in front of the chest, then swapped
+        s = 0.5 - 0.5 * np.cos(np.pi * k / (n - 1))
+        yield {
+            "left_hand": (1 - s) * through + s * front_r,
+            "right_hand": (1 - s) * rh + s * front_l,
+        }
+    for k in range(n):
+        s = 0.5 - 0.5 * np.cos(np.pi * k / (n - 1))
+        yield {
+            "left_hand": (1 - s) * front_r + s * front_l,
+            "right_hand": (1 - s) * front_l + s * front_r,
+        }
+
+
+def run(ctrl: Controller, targets, meter: CollisionModel):
+    dmin, statuses = [], []
+    for t in targets:
+        res = ctrl.step(t)
+        assert np.all(np.isfinite(res.q))
+        statuses.append(res.status)
+        dmin.append(meter.compute_all(ctrl.state)[0].min())
+    return np.array(dmin), statuses
+
+
+@pytest.fixture(scope="module")
+def meter(g1) -> CollisionModel:
+    """Exact distances of the 20 pairs (no broad phase), independent of the constraint."""
+    return CollisionModel(g1, [tuple(p) for p in PAIRS], broad_phase=False)
+
+
+def test_constraint_keeps_the_hands_out_of_the_body(g1, meter):
+    # Acceptance: the minimum pair distance never goes below d_s - 1 mm with the constraint;
+    # the same targets without it penetrate (pair distance < 0), so the constraint is what holds.
+    free, _ = run(Controller(config(False)), hands_through_body(Controller(config(False))), meter)
+    assert free.min() < 0.0
+    ctrl = Controller(config(True))
+    held, statuses = run(ctrl, hands_through_body(ctrl), meter)
+    assert held.min() >= D_S - 1e-3, f"min pair distance {held.min():.4f} m"
+    assert statuses.count("held") == 0
+
+
+def test_rows_are_minus_the_distance_rate(g1):
+    # Each active row C_i satisfies C_i v = -d'(q) v: checked against finite differences of
+    # the exact distance along q ⊕ h v (GJK tolerance tightened to 1e-12, h = 1e-6; tolerance
+    # 2e-5 per unit |v| covers the O(h) curvature term).
+    con = SelfCollision(pairs=PAIRS, d_s=D_S, d_i=0.5, broad_phase=False, trust_region=None)
+    con.bind(g1)
+    for req in con.model.gdata.distanceRequests:
+        req.gjk_tolerance = 1e-12
+    state = RobotState(g1)
+    q0 = g1.q_reference.copy()
+    q0[g1.joint_q_index[g1.joint_index("left_elbow_joint")]] = 1.4
+    state.update(q0)
+    blk = con.compute_rows(state, 0.01)
+    active = np.isfinite(blk.u)
+    assert active.sum() >= 5
+    d0 = con.model.distances.copy()
+    C = blk.C.copy()
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        v = rng.standard_normal(g1.nv)
+        state.update(pin.integrate(g1.model, q0, 1e-6 * v))
+        d1 = con.model.compute_all(state)[0]
+        rate = (d1 - d0) / 1e-6
+        np.testing.assert_allclose(C[active] @ v, -rate[active], atol=2e-5 * np.linalg.norm(v))
+
+
+def test_damper_bound_and_fixed_shape(g1):
+    # u = gain_per_tick (d - d_s) / dt on active rows (exact formula: 1e-12), inactive rows are
+    # zero with infinite bounds, and the block keeps one row per pair at every tick.
+    con = SelfCollision(pairs=PAIRS, d_s=D_S, d_i=D_I, gain_per_tick=0.5)
+    con.bind(g1)
+    state = RobotState(g1)
+    q = g1.q_reference.copy()
+    for angle in (0.9, 1.3, 1.7, 2.0):
+        q[g1.joint_q_index[g1.joint_index("left_elbow_joint")]] = angle
+        q[g1.joint_q_index[g1.joint_index("left_shoulder_roll_joint")]] = -0.2
+        state.update(q)
+        blk = con.compute_rows(state, 0.01)
+        assert blk.C.shape == (len(PAIRS), g1.nv) and con.n_rows == len(PAIRS)
+        d = con.model.distances
+        act = np.isfinite(blk.u)
+        np.testing.assert_allclose(
+            blk.u[act], np.maximum(0.5 * (d[act] - D_S) / 0.01, -con.recovery_speed), atol=1e-12
+        )
+        assert np.all(d[act] < D_I)
+        assert np.all(blk.C[~act] == 0.0) and np.all(np.isneginf(blk.l))
+
+
+@pytest.mark.parametrize("robot_name", ["g1", "talos"])
+def test_auto_pairs_are_reproducible_and_not_touching(robot_name, g1):
+    robot = g1 if robot_name == "g1" else RobotModel.from_name("talos")
+    a = SelfCollision(pairs="auto", d_s=0.02)
+    a.bind(robot)
+    b = SelfCollision(pairs="auto", d_s=0.02)
+    b.bind(robot)
+    assert a.pairs == b.pairs and len(a.pairs) > 50  # same list, same order
+    # No kept pair touches at the reference posture (exact distances, 1e-6: GJK).
+    d = CollisionModel(robot, a.pairs, broad_phase=False).compute_all(RobotState(robot))[0]
+    assert d.min() >= a.touch_distance - 1e-6
+    reasons = " ".join(a.left_out)
+    assert "adjacent" in reasons
+    lines = a.describe()
+    assert any(line.startswith("left out:") for line in lines)
+    assert sum(line.startswith("  keep ") for line in lines) == len(a.pairs)
+    shapes = a.model.shapes
+    joints = {n: s.joint for n, s in zip(a.model.bodies, shapes, strict=True)}
+    parents = robot.model.parents
+    for x, y in a.pairs:  # no adjacent pair kept
+        assert joints[x] != joints[y] and parents[joints[x]] != joints[y]
+        assert parents[joints[y]] != joints[x]
+    if robot_name == "talos":  # Talos has an SRDF with disabled pairs
+        assert any("SRDF" in r for r in a.left_out)
+    assert a.n_rows == min(len(a.pairs), 24)
+
+
+def test_recovery_from_inside_a_pair(g1, meter):
+    # Start 2 cm inside a pair: every tick returns a finite step, the violation is reported by
+    # the constraint, and the pair is back beyond d_s within 50 ticks (1e-4 m: GJK + QP).
+    free = Controller(config(False))
+    pen = None
+    for t in hands_through_body(free):
+        free.step(t)
+        d = meter.compute_all(free.state)[0]
+        if d.min() <= -0.02:
+            pen = free.state.q.copy()
+            break
+    assert pen is not None
+    ctrl = Controller(config(True))
+    ctrl.reset(pen)
+    con = ctrl.constraint("self_collision")
+    back = None
+    for k in range(60):
+        res = ctrl.step()
+        assert np.all(np.isfinite(res.v)) and res.status != "held"
+        if k == 0:
+            assert con.violations and max(con.violations.values()) >= D_S + 0.02 - 1e-3
+        if back is None and meter.compute_all(ctrl.state)[0].min() >= D_S - 1e-4:
+            back = k + 1
+    assert back is not None and back <= 50, back
+
+
+def test_bad_configurations_are_reported(g1):
+    with pytest.raises(ConfigError, match="d_i .* must be larger"):
+        SelfCollision(pairs=PAIRS, d_s=0.1, d_i=0.05)
+    with pytest.raises(ConfigError, match="give one of xi"):
+        SelfCollision(pairs=PAIRS, xi=0.1, gain_per_tick=0.5)
+    with pytest.raises(ConfigError, match="gain_per_tick must be in"):
+        SelfCollision(pairs=PAIRS, gain_per_tick=2.0)
+    with pytest.raises(ConfigError, match="'auto' or a list"):
+        SelfCollision(pairs="all")
+    con = SelfCollision(pairs=[["left_wrist_yaw_link", "torso_lnk"]])
+    with pytest.raises(UnknownNameError, match="torso_link"):
+        con.bind(g1, path="constraints[3]")
