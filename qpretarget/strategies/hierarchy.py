@@ -13,13 +13,14 @@ Tasks carry ``level: 1..K`` (1 = highest). Level :math:`k` solves
 
 where :math:`v^\star_{k-1}` is the solution of level :math:`k-1`. The equalities are imposed by
 construction rather than as rows: with :math:`Z_{<k}` an orthonormal basis of the null space of
-the stacked weighted Jacobians :math:`\sqrt{w_i} J_i` of every level above (from one SVD; singular
-values below ``rank_tolerance`` times the largest count as zero), level :math:`k` optimizes
-:math:`z` in
+the stacked weighted Jacobians :math:`\sqrt{w_i} J_i` of every level above, level :math:`k`
+optimizes :math:`z` in
 
 .. math:: v = v^\star_{k-1} + Z_{<k}\, z,
 
-so :math:`J_i v = J_i v^\star_{k-1}` holds exactly for every task above, whether that level was
+(:math:`Z_{<k+1} = Z_{<k}\, \mathrm{null}(J_k Z_{<k})`, one SVD per level; singular values below
+``rank_tolerance`` times the largest count as zero), so :math:`J_i v = J_i v^\star_{k-1}` holds
+exactly for every task above, whether that level was
 feasible or only solved in the least-squares sense (Dariush 2009 Algorithm 1 and Poubel 2014 eq. 4
 in the exact case), rank-deficient stacks (CRAC's over-constrained Task Set 1) need no special
 care, and :math:`z = 0` is always feasible. (Equality rows :math:`B v = B v^\star` were tried
@@ -160,14 +161,12 @@ class Hierarchy(Strategy):
             self._damping_spec, len(levels), levels, path="strategy.damping"
         )
         self._levels = []
-        n_above = 0
         for k, lvl in enumerate(levels):
             ids = [i for i, (_, _, li) in enumerate(task_dims) if li == lvl]
             names = [task_dims[i][0] for i in ids]
             dim = sum(task_dims[i][1] for i in ids)
             self._levels.append(_Level(lvl, ids, names, dim, k == 0, nv, n_rows, solver_factory()))
-            n_above += dim
-        self._J_above = np.zeros((n_above, nv))
+        self._N_above = np.eye(nv)
 
     def reset(self) -> None:
         for lv in self._levels:
@@ -176,9 +175,7 @@ class Hierarchy(Strategy):
     def solvers(self):  # noqa: ANN201
         return [lv.solver for lv in self._levels]
 
-    def assemble(
-        self, tp: TickProblem, k: int, x_above: np.ndarray | None, n_above: int
-    ) -> QPProblem:
+    def assemble(self, tp: TickProblem, k: int, x_above: np.ndarray | None) -> QPProblem:
         """Fill level ``k``'s QP (index into the sorted levels) for this tick.
 
         Level 0's variable is ``v``; level ``k > 0``'s is ``z`` with ``v = x_above + Z z``
@@ -188,7 +185,6 @@ class Hierarchy(Strategy):
             tp: the tick's problem.
             k: level index (0 = highest).
             x_above: solution of level ``k - 1`` (``None`` for ``k = 0``).
-            n_above: number of filled rows of the stacked higher-level Jacobians.
         """
         lv = self._levels[k]
         Jw, rw, p, Hv = lv.Jw, lv.rw, lv.problem, lv.Hv
@@ -217,7 +213,7 @@ class Hierarchy(Strategy):
             p.ub[...] = tp.ub
             return p
         # v = x + Z z: cost 1/2 z'Z'Hv Z z + z'Z'(Hv x + g_v), with g_v = -Jw' rw.
-        N = null_space_basis(self._J_above[:n_above], self.rank_tolerance)
+        N = self._N_above
         f = N.shape[1]
         Z = lv.Z
         Z[:, :f] = N
@@ -272,13 +268,12 @@ class Hierarchy(Strategy):
 
     def solve(self, tp: TickProblem) -> StrategyResult:
         x = None
-        n_above = 0
         iterations = 0
         solve_time = 0.0
         details: list[dict[str, Any]] = []
         status = "solved"
         for k, lv in enumerate(self._levels):
-            p = self.assemble(tp, k, x, n_above)
+            p = self.assemble(tp, k, x)
             sol = lv.solver.solve(p)
             ok = sol.success and sol.x is not None and bool(np.all(np.isfinite(sol.x)))
             if not ok:
@@ -319,8 +314,13 @@ class Hierarchy(Strategy):
                 break
             # Clip round-off outside the box so the next level starts from a feasible point.
             x = np.clip(v, tp.lb, tp.ub)
-            self._J_above[n_above : n_above + lv.dim] = lv.Jw
-            n_above += lv.dim
+            if k + 1 < len(self._levels):
+                # null([J_1; ...; J_k]) = Z_{<k} null(J_k Z_{<k}): one small SVD per level.
+                if lv.first:
+                    self._N_above = null_space_basis(lv.Jw, self.rank_tolerance)
+                elif self._N_above.shape[1]:
+                    Nk = null_space_basis(lv.Jw @ self._N_above, self.rank_tolerance)
+                    self._N_above = self._N_above @ Nk
         return StrategyResult(x, True, status, iterations, solve_time, details)
 
     def __repr__(self) -> str:
