@@ -659,18 +659,29 @@ class CollisionModel:
         (module docstring), from ``state.data.J`` (WORLD joint Jacobians of this tick): one
         ``(2k, 6) @ (6, nv)`` product for the whole block.
         """
-        k = self.active.size
-        if k == 0:
+        if self.active.size == 0:
             return np.zeros((0, self.robot.nv))
-        P, n = self._points, self._n
-        n2 = np.vstack([n, n])
+        return self.point_rows(state, self.active, self._points, self._n)
+
+    def point_rows(
+        self, state: RobotState, pairs: np.ndarray, points: np.ndarray, normals: np.ndarray
+    ) -> np.ndarray:
+        r"""Rows :math:`n^\top (J_b(p_b) - J_a(p_a))` (k, nv) for given points on the pairs' bodies.
+
+        Args:
+            state: kinematics of the tick.
+            pairs: (k,) pair indices.
+            points: (2k, 3) world points, stacked ``[p_a; p_b]``.
+            normals: (k, 3) unit directions from a to b.
+        """
+        k = pairs.size
+        n2 = np.vstack([normals, normals])
         c = np.empty((2 * k, 6))
         c[:, :3] = n2
-        # p x n for both witness points of every pair (np.cross is slow on small arrays).
-        c[:, 3:] = P[:, _YZX] * n2[:, _ZXY] - P[:, _ZXY] * n2[:, _YZX]
+        # p x n for both points of every pair (np.cross is slow on small arrays).
+        c[:, 3:] = points[:, _YZX] * n2[:, _ZXY] - points[:, _ZXY] * n2[:, _YZX]
         R = c @ state.data.J  # (2k, nv); data.J: WORLD Jacobian of every joint, by column
-        g = np.concatenate([self._ga[self.active], self._gb[self.active]])
-        R *= self._support[g]
+        R *= self._support[np.concatenate([self._ga[pairs], self._gb[pairs]])]
         return R[k:] - R[:k]
 
     def pair_levers(self, pairs: np.ndarray) -> np.ndarray:

@@ -38,6 +38,8 @@ from ..robot import RobotModel, RobotState
 from ..validation import positive_float
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
 
+#: Smallest trust-region scale (the step bound shrinks at most by its square root, 1/64).
+MIN_TRUST_SCALE = 1.0 / 4096
 #: QP rows of an ``auto`` pair set unless ``max_rows`` says otherwise.
 AUTO_MAX_ROWS = 24
 
@@ -194,11 +196,15 @@ class DistanceDamper(Constraint):
     def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
         """Remember the first-order prediction of the active pairs' next distances."""
         model = self.model
-        if self.trust_region is None or model is None or model.active.size == 0:
+        if model is None or model.active.size == 0:
             self._pred_pairs = np.zeros(0, dtype=int)
             return
-        self._pred_pairs = model.active.copy()
-        self._pred = model.distances[self._pred_pairs] + (self._active_grad @ v) * dt
+        act = model.active
+        if self.trust_region is not None:
+            self._pred_pairs = act.copy()
+            self._pred = model.distances[act] + (self._active_grad @ v) * dt
+        else:
+            self._pred_pairs = np.zeros(0, dtype=int)
 
     def _row_mask(self, active: np.ndarray) -> np.ndarray:
         """Which active pairs get a row this tick (all of them unless a subclass disarms some)."""
@@ -222,7 +228,11 @@ class DistanceDamper(Constraint):
             ok = model.exact[pairs]
             bad = ok & (err < -self.trust_region)
             good = ok & ~bad
-            self._scale[pairs[bad]] = np.maximum(self._scale[pairs[bad]] * 0.5, 1.0 / 256)
+            if bad.any():
+                # The step's error is first order in the step where facets switch, and the step
+                # goes as sqrt(scale): shrink by (eps / err)^2, at least by half.
+                f = np.clip((self.trust_region / err[bad]) ** 2, 1.0 / 64, 0.5)
+                self._scale[pairs[bad]] = np.maximum(self._scale[pairs[bad]] * f, MIN_TRUST_SCALE)
             self._scale[pairs[good]] = np.minimum(self._scale[pairs[good]] * 1.25, 1.0)
             self._pred_pairs = np.zeros(0, dtype=int)
 
@@ -234,9 +244,10 @@ class DistanceDamper(Constraint):
         pair :math:`p` is within :math:`d_i`, every rotational coordinate moving one of its
         bodies is bounded by :math:`|v_j|\,dt \le \sqrt{2 s_p \varepsilon / r_{pj}}`,
         :math:`\varepsilon` = ``trust_region`` [m] (translations are exact and free). As in a
-        trust-region SQP, the scale :math:`s_p \in [1/256, 1]` halves after a tick whose
-        first-order prediction of :math:`d_p` was optimistic by more than :math:`\varepsilon`
-        (witness points jumping between facets of the hulls) and grows back by 1.25 after an
+        trust-region SQP, the scale :math:`s_p \in [1/4096, 1]` shrinks by
+        :math:`\min(1/2, (\varepsilon/e)^2)` after a tick whose first-order prediction of
+        :math:`d_p` was optimistic by :math:`e > \varepsilon` (witness points jumping between
+        facets of the hulls: an error first-order in the step) and grows back by 1.25 after an
         accurate one. Far from the speeds of a tracking motion (G1 arm, :math:`\varepsilon` =
         0.2 mm: 2-6 rad/s), it stops the two-tick oscillations that full-error-correction tasks
         start against active rows, and with them the violations of :math:`d_s`.
@@ -266,6 +277,7 @@ class DistanceDamper(Constraint):
         if self._last_rows.size:  # clear last tick's rows only
             C[self._last_rows] = 0.0
             hi[self._last_rows] = np.inf
+            self._last_rows = np.zeros(0, dtype=int)
         act = model.active
         d = model.distances
         self.violations = {}
@@ -292,7 +304,7 @@ class DistanceDamper(Constraint):
                     self.violations[f"{a}/{b}"] = float(self.safety[act[i]] - da[i])
         else:
             self.min_distance = float(d.min()) if d.size else np.inf
-            self._last_rows = self._last_pairs = np.zeros(0, dtype=int)
+            self._last_pairs = np.zeros(0, dtype=int)
         self.last_time = time.perf_counter() - t0
         return ConstraintBlock(self.name, C, lo, hi)
 
