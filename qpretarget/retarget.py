@@ -578,7 +578,7 @@ def whole_body_config(robot: str = "g1") -> dict[str, Any]:
         "robot": robot_spec,
         "dt": 0.01,
         "strategy": {"type": "augmentation"},
-        "regularization": {"type": "identity", "damping": 0.05},
+        "regularization": {"type": "identity", "damping": 0.3},
         "solver": {"name": "proxsuite", "eps_abs": 1.0e-9},
         "tasks": tasks,
         "constraints": [
@@ -729,6 +729,7 @@ class Retargeter:
         spec: A ``retarget:`` mapping overriding the controller's, or a :class:`RetargetSpec`.
         keypoint_map: Key-point map of the motions (bundled name, path, dict or
             :class:`KeypointMap`), overriding ``retarget.keypoint_map``; ``None`` guesses it.
+        rate: Control rate [Hz], overriding ``retarget.rate`` (default: ``1 / dt``).
 
     Raises:
         ConfigError: Invalid ``retarget:`` section (with the YAML path).
@@ -740,6 +741,7 @@ class Retargeter:
         spec: Mapping[str, Any] | RetargetSpec | None = None,
         *,
         keypoint_map: Any = None,
+        rate: float | None = None,
     ) -> None:
         self.controller = controller
         if isinstance(spec, RetargetSpec):
@@ -747,6 +749,8 @@ class Retargeter:
         else:
             raw = spec if spec is not None else controller.config.get("retarget")
             self.spec = RetargetSpec.parse(raw, controller)
+        if rate is not None:
+            self.spec = replace(self.spec, rate=_number(rate, "rate"))
         self.keypoint_map = keypoint_map if keypoint_map is not None else self.spec.keypoint_map
         self.rate = self.spec.rate or 1.0 / controller.dt
         self.dt = 1.0 / self.rate

@@ -1,20 +1,25 @@
 # SPDX-License-Identifier: Apache-2.0
-"""``qpretarget demo``: run a bundled robot on a built-in scripted motion and print a summary.
+"""``qpretarget demo``: retarget the built-in human motion to a bundled robot, nothing to download.
 
-Interim version: scripted hand/elbow/pelvis targets on G1 (until the built-in human motion lands).
+The motion is example-robot-data's ``human_description`` model driven by a scripted wave, a reach
+across the body, a squat and a step to the side (:mod:`qpretarget.builtin_motion`). The controller
+is the repository's ``configs/<robot>_whole_body.yaml`` when it exists, otherwise the one
+:func:`qpretarget.retarget.whole_body_config` builds from the robot's registry entry.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 HELP = """examples:
-  qpretarget demo                 G1 tracks a scripted motion for 10 s
-  qpretarget demo --seconds 3
+  qpretarget demo                       G1 imitates the built-in motion (10 s), prints a summary
+  qpretarget demo -o demo_g1.npz        also write the run (qpretarget evaluate/view read it)
+  qpretarget demo --robot talos
+  qpretarget demo --seconds 4           the first 4 s only (wave and part of the reach)
+  qpretarget demo --config my.yaml      your own controller (needs a `retarget:` section)
 """
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -24,42 +29,70 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``demo`` subcommand."""
     p = sub.add_parser(
         "demo",
-        help="run G1 on a built-in motion and print tracking error and ticks per second",
-        description="Retarget a built-in motion on a bundled robot; nothing to download.",
+        help="retarget the built-in human motion to G1 and print a summary",
+        description=(
+            "Retarget a built-in human motion (wave, reach across, squat, side step) to a bundled "
+            "robot with the whole-body controller; nothing to download."
+        ),
         epilog=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--robot", default="g1", help="bundled robot (default g1)")
-    p.add_argument("--seconds", type=float, default=10.0, help="duration [s] (default 10)")
+    p.add_argument("--robot", default="g1", help="bundled robot with feet (default g1)")
+    p.add_argument("-o", "--output", default=None, help="write the run file (.npz)")
+    p.add_argument("--seconds", type=float, default=None, help="length of the motion [s]")
+    p.add_argument("--config", default=None, help="controller YAML (default: whole-body config)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
+
+
+def demo_controller(robot: str, config: str | None = None):  # noqa: ANN201
+    """The demo's controller: ``config``, else ``configs/<robot>_whole_body.yaml``, else generated.
+
+    Returns:
+        ``(controller, source)`` with ``source`` the file used or ``"generated"``.
+    """
+    import yaml
+
+    from ..controller import Controller
+    from ..retarget import whole_body_config
+
+    if config is not None:
+        return Controller.from_yaml(config), str(config)
+    path = CONFIGS / f"{robot}_whole_body.yaml"
+    if path.is_file():
+        text = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        if isinstance(text, dict) and text.get("retarget") is not None:
+            return Controller.from_yaml(path), str(path)
+    return Controller(whole_body_config(robot)), "generated (retarget.whole_body_config)"
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo and print its summary."""
-    from ..controller import Controller
-    from ..solver_comparison import scripted_targets
+    from ..builtin_motion import DURATION, builtin_motion
+    from ..errors import ConfigError
+    from ..retarget import Retargeter, format_summary, summarize_run
 
-    cfg = CONFIGS / f"{args.robot}_augmentation.yaml"
-    ctrl = Controller.from_yaml(cfg)
-    targets = list(scripted_targets(ctrl, args.seconds))
-    ctrl.reset()
-    errs: dict[str, list[float]] = {}
-    steps = []
+    seconds = DURATION if args.seconds is None else args.seconds
+    if not 0.2 <= seconds:
+        raise ConfigError(f"--seconds must be at least 0.2 s, got {seconds}.")
+    t_load = time.perf_counter()
+    controller, source = demo_controller(args.robot, args.config)
+    motion = builtin_motion(duration=min(seconds, DURATION))
+    retargeter = Retargeter(controller)
+    t_load = time.perf_counter() - t_load
     t0 = time.perf_counter()
-    for tg in targets:
-        res = ctrl.step(tg)
-        steps.append(res.step_time)
-        for k, e in res.task_errors.items():
-            errs.setdefault(k, []).append(e)
+    traj = retargeter.retarget(motion, progress=not args.quiet and sys.stderr.isatty())
     wall = time.perf_counter() - t0
-    r = ctrl.robot
-    print(f"robot {r.name}: {len(targets)} ticks ({args.seconds:.1f} s at {1 / ctrl.dt:.0f} Hz)")
-    print(f"speed: {len(targets) / wall:.0f} ticks/s, median step {np.median(steps) * 1e6:.0f} µs")
-    for k, e in errs.items():
-        rms = float(np.sqrt(np.mean(np.square(e))))
-        task = ctrl.tasks[k]
-        if getattr(task, "has_position", False):
-            print(f"  {k:12s} RMS error {rms * 1e3:7.2f} mm")
-        elif getattr(task, "has_orientation", False):
-            print(f"  {k:12s} RMS error {np.degrees(rms):7.2f} deg")
+    summary = summarize_run(traj, controller, wall_time=wall)
+    title = (
+        f"qpretarget demo: built-in human motion (wave, reach across, squat, side step) -> "
+        f"{controller.robot.name}\nconfig       {source}\n"
+        f"pipeline     {motion.rate:g} Hz key-points, {traj.meta['filter']['cutoff_hz']:g} Hz "
+        f"Butterworth, splines to {traj.meta['control_rate']:g} Hz, {traj.meta['scaling']} "
+        f"scaling, support phases {'on' if retargeter.support else 'off'} "
+        f"(setup {t_load:.1f} s)"
+    )
+    print(format_summary(summary, title=title))
+    if args.output:
+        print(f"wrote {traj.save(args.output)}")
     return 0

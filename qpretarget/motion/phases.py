@@ -673,8 +673,12 @@ class SupportSequencer:
 
 
 def convex_hull(points: np.ndarray) -> np.ndarray:
-    """Counter-clockwise convex hull of 2-D points (monotone chain), ``(n, 2)``."""
-    pts = sorted({(float(x), float(y)) for x, y in np.asarray(points, float)})
+    """Counter-clockwise convex hull of 2-D points (monotone chain), ``(n, 2)``.
+
+    Points are rounded to 1e-9 m first and collinear points dropped, so numerical noise on
+    coincident sole corners never makes a degenerate edge.
+    """
+    pts = sorted({(round(float(x), 9), round(float(y), 9)) for x, y in np.asarray(points, float)})
     if len(pts) <= 2:
         return np.array(pts)
 
@@ -683,7 +687,7 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
         for p in seq:
             while len(out) >= 2:
                 (ax, ay), (bx, by) = out[-2], out[-1]
-                if (bx - ax) * (p[1] - ay) - (by - ay) * (p[0] - ax) > 1e-15:
+                if (bx - ax) * (p[1] - ay) - (by - ay) * (p[0] - ax) > 1e-12:
                     break
                 out.pop()
             out.append(p)
