@@ -830,6 +830,10 @@ class Retargeter:
         weights = {k: w for k, w in COM_WEIGHTS.items() if k in self.robot_points}
         total = sum(weights.values())
         self.com_weights = {k: w / total for k, w in weights.items()} if total > 0 else {}
+        self._com_w = np.array(list(self.com_weights.values()))
+        self._com_ref_xy = sum(
+            (w * self.robot_points[k][:2] for k, w in self.com_weights.items()), np.zeros(2)
+        )
         psi_r = (
             yaw_of(self.robot_waist_rotation[:, 0])
             if self.robot_waist_rotation is not None
@@ -1281,16 +1285,24 @@ class Retargeter:
         (:data:`COM_WEIGHTS`); equal to the current CoM when the targets are reached, so in double
         support the CoM target never pulls against the other tasks.
         """
-        if not self.com_weights:
+        S = self._weighted_xy(scaled)
+        if S is None:
             return None
         data = self.controller.state.data
-        d = np.zeros(2)
-        for k, w in self.com_weights.items():
-            p = scaled.get(k)
-            if p is None or not np.all(np.isfinite(p)):
-                return None
-            d += w * (p[:2] - self._robot_point(k, data)[:2])
-        return np.asarray(com, float)[:2] + d
+        X = sum(w * self._robot_point(k, data)[:2] for k, w in self.com_weights.items())
+        return np.asarray(com, float)[:2] + S - X
+
+    def _weighted_xy(self, points: Mapping[str, np.ndarray]) -> np.ndarray | None:
+        r""":math:`\sum_k w_k p_{k,xy}` over :data:`COM_WEIGHTS` (``None`` if one is missing)."""
+        if not self.com_weights:
+            return None
+        try:
+            P = np.array([points[k][:2] for k in self.com_weights])
+        except KeyError:
+            return None
+        if not np.all(np.isfinite(P)):
+            return None
+        return self._com_w @ P
 
     def _robot_point(self, name: str, data: pin.Data) -> np.ndarray:
         src = self.robot_map.keypoints[name]
@@ -1309,15 +1321,10 @@ class Retargeter:
         The robot's reference CoM moved by the weighted key-point displacements from the
         reference posture (:data:`COM_WEIGHTS`).
         """
-        if not self.com_weights:
+        S = self._weighted_xy(scaled)
+        if S is None:
             return None
-        d = np.zeros(2)
-        for k, w in self.com_weights.items():
-            p = scaled.get(k)
-            if p is None or not np.all(np.isfinite(p)):
-                return None
-            d += w * (p[:2] - self.robot_points[k][:2])
-        return self.com_reference[:2] + d
+        return self.com_reference[:2] + S - self._com_ref_xy
 
     def _task_targets(
         self,

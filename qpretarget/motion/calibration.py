@@ -136,13 +136,34 @@ def triad(left: np.ndarray, right: np.ndarray, lower: np.ndarray, upper: np.ndar
     Returns:
         ``(..., 3, 3)`` rotations (columns x, y, z); NaN where an input is NaN or degenerate.
     """
-    y = np.asarray(left, float) - np.asarray(right, float)
+    left = np.asarray(left, float)
+    if left.shape == (3,):
+        return _triad3(left, np.asarray(right, float), np.asarray(lower, float), upper)
+    y = left - np.asarray(right, float)
     y = y / np.linalg.norm(y, axis=-1, keepdims=True)
     up = np.asarray(upper, float) - np.asarray(lower, float)
     z = up - np.sum(up * y, axis=-1, keepdims=True) * y
     z = z / np.linalg.norm(z, axis=-1, keepdims=True)
     x = np.cross(y, z)
     return np.stack([x, y, z], axis=-1)
+
+
+def _triad3(left: np.ndarray, right: np.ndarray, lower: np.ndarray, upper: Any) -> np.ndarray:
+    """:func:`triad` of single points, with scalar arithmetic (called every control tick)."""
+    y0, y1, y2 = (float(a - b) for a, b in zip(left, right, strict=True))
+    n = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+    up = np.asarray(upper, float) - lower
+    if not n > 1e-12:
+        return np.full((3, 3), np.nan)
+    y0, y1, y2 = y0 / n, y1 / n, y2 / n
+    d = float(up[0]) * y0 + float(up[1]) * y1 + float(up[2]) * y2
+    z0, z1, z2 = float(up[0]) - d * y0, float(up[1]) - d * y1, float(up[2]) - d * y2
+    n = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
+    if not n > 1e-12:
+        return np.full((3, 3), np.nan)
+    z0, z1, z2 = z0 / n, z1 / n, z2 / n
+    x0, x1, x2 = y1 * z2 - y2 * z1, y2 * z0 - y0 * z2, y0 * z1 - y1 * z0
+    return np.array([[x0, y0, z0], [x1, y1, z1], [x2, y2, z2]])
 
 
 def nearest_rotation(M: np.ndarray) -> np.ndarray:

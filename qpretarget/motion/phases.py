@@ -122,8 +122,8 @@ class SupportPhaseDetector:
     def reset(self) -> None:
         """Forget the history (ground, previous samples, states)."""
         self.phase = "double"
-        self._ground: np.ndarray | None = None
-        self._prev: dict[str, np.ndarray] = {}
+        self._ground: list[float] | None = None
+        self._prev: dict[str, list[list[float]]] = {}
         self._t_prev: float | None = None
         self._support = {"left": True, "right": True}
         self._pending: dict[str, float | None] = {"left": None, "right": None}
@@ -143,31 +143,34 @@ class SupportPhaseDetector:
             ``"double"``, ``"left"`` or ``"right"``.
         """
         feet = {
-            "left": np.asarray(left, float).reshape(-1, 3),
-            "right": np.asarray(right, float).reshape(-1, 3),
+            "left": np.asarray(left, float).reshape(-1, 3).tolist(),
+            "right": np.asarray(right, float).reshape(-1, 3).tolist(),
         }
-        z = np.stack([feet["left"][:, 2], feet["right"][:, 2]])
-        low = np.nanmin(np.where(np.isfinite(z), z, np.inf), axis=0)
+        inf = math.inf
         if self._ground is None:
-            self._ground = low
-        else:
-            self._ground = np.minimum(self._ground, low)
+            self._ground = [inf] * len(feet["left"])
+        ground = self._ground
+        for pts in feet.values():  # running minimum of each point type over both feet
+            for i, p in enumerate(pts):
+                if p[2] < ground[i]:  # False for NaN
+                    ground[i] = p[2]
         dt = None if self._t_prev is None else t - self._t_prev
         th = self.thresholds
         first = self._t_prev is None
         for side, pts in feet.items():
-            ok = np.all(np.isfinite(pts), axis=1) & np.isfinite(self._ground)
-            if not ok.any():
+            heights = [
+                p[2] - ground[i] for i, p in enumerate(pts) if math.isfinite(p[2] - ground[i])
+            ]
+            if not heights:
                 continue
-            h = float(np.min(pts[ok, 2] - self._ground[ok]))
+            h = min(heights)
             prev = self._prev.get(side)
-            if dt is None or prev is None or not dt > 0:
-                v = 0.0
-            else:
-                d = np.linalg.norm(pts - prev, axis=1) / dt
-                d = d[ok & np.isfinite(d)]
-                v = float(d.min()) if d.size else 0.0
-            self._prev[side] = pts.copy()
+            v = 0.0
+            if dt is not None and prev is not None and dt > 0:
+                speeds = [math.dist(p, q) / dt for p, q in zip(pts, prev, strict=True)]
+                speeds = [x for x in speeds if math.isfinite(x)]
+                v = min(speeds) if speeds else 0.0
+            self._prev[side] = pts
             self.height[side], self.speed[side] = h, v
             if first:
                 self._support[side] = h < th.height_on
