@@ -132,8 +132,9 @@ def primitive_points(geom: Any) -> np.ndarray:
 
 
 _ICO = _icosphere()
-_YZX = np.array([1, 2, 0])
-_ZXY = np.array([2, 0, 1])
+#: Gather of [p | n] (k, 6) giving [p_y p_z p_x p_z p_x p_y | n_z n_x n_y n_y n_z n_x]:
+#: p x n = first half * second half, left three minus right three.
+_CROSS = np.array([1, 2, 0, 2, 0, 1, 5, 3, 4, 4, 5, 3])
 
 
 def _transform(M: pin.SE3, points: np.ndarray) -> np.ndarray:
@@ -475,7 +476,7 @@ class CollisionModel:
         geometry: str = "convex_hull",
         obstacles: Sequence[LinkShape] = (),
         broad_phase: bool = True,
-        hysteresis: float = 0.03,
+        hysteresis: float = 0.0,
         path: str = "",
     ) -> None:
         self.robot = robot
@@ -545,18 +546,30 @@ class CollisionModel:
                 self._support[g, jm.idx_v : jm.idx_v + jm.nv] = 1.0
             self._lever[g], self._rot_lever[g] = _lever_bounds(model, s.joint, s.radius)
         self.broad_phase = bool(broad_phase)
+        # Per pair: bound of the rate of change of the distance per unit |v_j|. A coordinate
+        # moving both bodies (a common ancestor: base, waist) moves them rigidly together and
+        # leaves the distance unchanged, so only the coordinates of one body's branch count.
+        Sa, Sb = self._support[self._ga], self._support[self._gb]
+        self._pair_lever = self._lever[self._ga] * (1 - Sb) + self._lever[self._gb] * (1 - Sa)
         self._flags = np.ones(self.n_pairs, dtype=bool)  # mirrors gdata.activeCollisionPairs
+        self._flag_bytes = self._flags.tobytes()
+        self._idx = np.arange(self.n_pairs)
+        self._idx_list = self._idx.tolist()
+        self._thr = np.full(self.n_pairs, np.inf)
+        self._thr_key = (np.nan, np.nan)
+        self._mask_key = b""
+        self._mask = np.zeros((0, model.nv))
         #: Distance of every pair after :meth:`update`: exact where :attr:`exact`, else a lower
         #: bound (>= the influence distance of that call).
         self.distances = np.full(self.n_pairs, np.inf)
         self.exact = np.zeros(self.n_pairs, dtype=bool)
         self._model = model
-        self._q_last: np.ndarray | None = None
-        self._key: tuple[int, int] | None = None
+        self._q_last = np.zeros(model.nq)
+        self._fresh = True
         #: Indices of the pairs closer than the influence distance, and their witness points
         #: (world, (k, 3)) and unit normals from a to b, after :meth:`update`.
         self.active = np.zeros(0, dtype=int)
-        self._points = np.zeros((0, 3))
+        self._pa = np.zeros((0, 3))
         self._n = np.zeros((0, 3))
         #: Time spent in the last :meth:`update` [s] and number of exact pair distances.
         self.last_update_time = 0.0
@@ -565,8 +578,7 @@ class CollisionModel:
     # ------------------------------------------------------------------ per tick
     def invalidate(self) -> None:
         """Forget the temporal-coherence bounds (next :meth:`update` computes every pair)."""
-        self._q_last = None
-        self._key = None
+        self._fresh = True
 
     def update(self, state: RobotState, influence: float = np.inf) -> np.ndarray:
         """Distances of this tick; witness points of the pairs closer than ``influence``.
@@ -582,57 +594,58 @@ class CollisionModel:
         t0 = time.perf_counter()
         q = state.q
         lb = self.distances
-        if self._q_last is None or not self.broad_phase or influence == np.inf:
+        if self._fresh or not self.broad_phase or influence == np.inf:
             lb.fill(-np.inf)
+            self._fresh = False
         else:
-            m = self._lever @ np.abs(pin.difference(self._model, self._q_last, q))
-            lb -= m[self._ga] + m[self._gb]
-        self._q_last = q.copy()
-        need = lb < influence
-        if self.hysteresis > 0:  # keep computing pairs that just left: fewer on/off switches
-            need |= self._flags & (lb < influence + self.hysteresis)
-        changed = need != self._flags
-        if changed.any():
+            dq = pin.difference(self._model, self._q_last, q)
+            lb -= self._pair_lever @ np.abs(dq, out=dq)
+        self._q_last[:] = q
+        # Compute a pair while its bound is below the influence distance, and keep computing
+        # it until the bound exceeds influence + hysteresis (fewer on/off switches).
+        if self.hysteresis > 0:
+            if self._thr_key != (influence, self._flag_bytes):
+                np.copyto(self._thr, influence)
+                self._thr[self._flags] += self.hysteresis
+                self._thr_key = (influence, self._flag_bytes)
+            need = lb < self._thr
+        else:
+            need = lb < influence
+        nb = need.tobytes()
+        if nb != self._flag_bytes:
             gd = self.gdata
-            for i in np.flatnonzero(changed).tolist():
+            for i in np.flatnonzero(need != self._flags).tolist():
                 if need[i]:
                     gd.activateCollisionPair(i)
                 else:
                     gd.deactivateCollisionPair(i)
-            self._flags[...] = need
-        idx = np.flatnonzero(need)
-        self.exact = need
+            self._flags = need
+            self._flag_bytes = nb
+            self._idx = np.flatnonzero(need)
+            self._idx_list = self._idx.tolist()
+        idx = self._idx
+        self.exact = self._flags
         act = idx
+        sel: list[Any] = []
+        dl: list[float] = []
         if idx.size:
             pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
             pin.computeDistances(self.gmodel, self.gdata)
             res = self._results
-            sel = [res[i] for i in idx.tolist()]
-            d = np.array([r.min_distance for r in sel])
-            lb[idx] = d
-            close = d < influence
-            if not close.all():
-                act = idx[close]
-                sel = [r for r, c in zip(sel, close.tolist(), strict=True) if c]
-                d = d[close]
-        k = act.size
+            sel = [res[i] for i in self._idx_list]
+            dl = [r.min_distance for r in sel]
+            lb[idx] = dl
+            if max(dl) >= influence:
+                keep = [x < influence for x in dl]
+                act = idx[keep]
+                sel = [r for r, c in zip(sel, keep, strict=True) if c]
+                dl = [x for x, c in zip(dl, keep, strict=True) if c]
         self.active = act
-        if k:
-            # Witness points stacked [p_a; p_b] (2k, 3); p_b - p_a = d n (coal >= 3).
-            P = np.array([r.getNearestPoint1() for r in sel] + [r.getNearestPoint2() for r in sel])
-            n = P[k:] - P[:k]
-            small = np.abs(d) < 1e-9
-            if small.any():  # touching: the normal cannot come from the points
-                for i in np.flatnonzero(small).tolist():
-                    n[i] = sel[i].normal
-                d = np.where(small, 1.0, d)
-            n /= d[:, None]
-            self._points = P
-            self._n = n
+        if act.size:
+            self._pa = np.array([r.getNearestPoint1() for r in sel])  # witness points on a
+            self._n = np.array([r.normal for r in sel])  # unit, from a to b: p_b = p_a + d n
         else:
-            self._points = np.zeros((0, 3))
-            self._n = np.zeros((0, 3))
-        self._key = (id(state), id(q))
+            self._pa = self._n = np.zeros((0, 3))
         self.last_n_computed = int(idx.size)
         self.last_update_time = time.perf_counter() - t0
         return lb
@@ -640,12 +653,12 @@ class CollisionModel:
     @property
     def witness_a(self) -> np.ndarray:
         """World witness points on body a of the :attr:`active` pairs (k, 3)."""
-        return self._points[: self.active.size]
+        return self._pa
 
     @property
     def witness_b(self) -> np.ndarray:
         """World witness points on body b of the :attr:`active` pairs (k, 3)."""
-        return self._points[self.active.size :]
+        return self._pa + self.distances[self.active, None] * self._n
 
     @property
     def normals(self) -> np.ndarray:
@@ -656,33 +669,42 @@ class CollisionModel:
         r"""Rows :math:`\partial d / \partial q` (k, nv) of the last update's :attr:`active` pairs.
 
         :math:`\partial d/\partial q = n^\top (J_b(p_b) - J_a(p_a))` in the tangent space
-        (module docstring), from ``state.data.J`` (WORLD joint Jacobians of this tick): one
-        ``(2k, 6) @ (6, nv)`` product for the whole block.
+        (module docstring), from ``state.data.J`` (WORLD joint Jacobians of this tick). As
+        :math:`p_b - p_a = d\,n`, :math:`p_b \times n = p_a \times n`: both bodies share the
+        coefficients :math:`c = [n;\ p_a \times n]` and the rows are
+        :math:`(c^\top J^W) \circ (S_b - S_a)`, one ``(k, 6) @ (6, nv)`` product with the
+        difference of the bodies' support masks.
         """
         if self.active.size == 0:
             return np.zeros((0, self.robot.nv))
-        return self.point_rows(state, self.active, self._points, self._n)
+        return self.point_rows(state, self.active, self._pa, self._n)
 
     def point_rows(
         self, state: RobotState, pairs: np.ndarray, points: np.ndarray, normals: np.ndarray
     ) -> np.ndarray:
-        r"""Rows :math:`n^\top (J_b(p_b) - J_a(p_a))` (k, nv) for given points on the pairs' bodies.
+        r"""Rows :math:`n^\top (J_b(p) - J_a(p))` (k, nv) for points on the line of each normal.
 
         Args:
             state: kinematics of the tick.
             pairs: (k,) pair indices.
-            points: (2k, 3) world points, stacked ``[p_a; p_b]``.
+            points: (k, 3) world points (witness points on body a; any point on the line
+                :math:`p_a + t\,n` gives the same rows).
             normals: (k, 3) unit directions from a to b.
         """
         k = pairs.size
-        n2 = np.vstack([normals, normals])
-        c = np.empty((2 * k, 6))
-        c[:, :3] = n2
-        # p x n for both points of every pair (np.cross is slow on small arrays).
-        c[:, 3:] = points[:, _YZX] * n2[:, _ZXY] - points[:, _ZXY] * n2[:, _YZX]
-        R = c @ state.data.J  # (2k, nv); data.J: WORLD Jacobian of every joint, by column
-        R *= self._support[np.concatenate([self._ga[pairs], self._gb[pairs]])]
-        return R[k:] - R[:k]
+        c = np.empty((k, 6))
+        c[:, :3] = normals
+        # p x n with one gather (np.cross is slow on small arrays).
+        x = np.concatenate([points, normals], axis=1)[:, _CROSS]  # (k, 12)
+        prod = x[:, :6] * x[:, 6:]
+        np.subtract(prod[:, :3], prod[:, 3:], out=c[:, 3:])
+        R = c @ state.data.J  # (k, nv); data.J: WORLD Jacobian of every joint, by column
+        key = pairs.tobytes()
+        if key != self._mask_key:  # S_b - S_a of these pairs (cached while the set holds)
+            self._mask = self._support[self._gb[pairs]] - self._support[self._ga[pairs]]
+            self._mask_key = key
+        R *= self._mask
+        return R
 
     def pair_levers(self, pairs: np.ndarray) -> np.ndarray:
         """(k, nv) rotation lever arms [m] of each coordinate on either body of ``pairs``.

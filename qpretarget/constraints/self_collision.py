@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -154,13 +155,9 @@ class DistanceDamper(Constraint):
         self.model: CollisionModel | None = None
         self.pairs: list[tuple[str, str]] = []
         self.safety = np.zeros(0)
-        #: Time spent in the last :meth:`compute_rows` [s] (distances + rows).
+        #: Time of the last tick's collision block [s]: distances, trust region, rows and the
+        #: prediction of the next distances.
         self.last_time = 0.0
-        #: Smallest pair distance seen at the last tick [m] (``inf`` if no pair was close).
-        self.min_distance = np.inf
-        #: Pairs closer than their safety distance at the last tick: ``"a/b"`` -> depth [m].
-        self.violations: dict[str, float] = {}
-        self._cache_key: tuple[int, int] | None = None
 
     # ------------------------------------------------------------------ setup
     def _setup_rows(self, robot: RobotModel) -> None:
@@ -170,13 +167,30 @@ class DistanceDamper(Constraint):
         self._l = np.full(self.n_rows, -np.inf)
         self._u = np.full(self.n_rows, np.inf)
         self._grad = np.zeros((P, robot.nv))
+        self._grad_act = np.zeros((0, robot.nv))
         self._tr_lb = np.full(robot.nv, -np.inf)
         self._tr_ub = np.full(robot.nv, np.inf)
         self._scale = np.ones(P)
+        self._sqrt_scale = np.ones(P)
+        self._scaled = False
         self._pred_pairs = np.zeros(0, dtype=int)
         self._pred = np.zeros(0)
         self._last_rows = np.zeros(0, dtype=int)
         self._last_pairs = np.zeros(0, dtype=int)
+        self._gap = np.zeros(0)
+        uniform = bool(np.all(self.safety == self.safety[0])) if P else True
+        self._safety_scalar = float(self.safety[0]) if P and uniform else None
+        # Direct rows (row i = pair i) unless rows are capped or a subclass disarms some.
+        self._direct = self.max_rows is None and type(self)._row_mask is DistanceDamper._row_mask
+        # Trust-region step bound per pair and coordinate at scale 1: sqrt(2 eps / r) [rad].
+        assert self.model is not None
+        eps = self.trust_region if self.trust_region is not None else np.inf
+        with np.errstate(divide="ignore"):  # inf where no rotation moves the pair
+            self._step0 = np.sqrt(2.0 * eps / self.model.pair_levers(np.arange(P)))
+        self._fp_w = np.random.default_rng(0).standard_normal(robot.nq)
+        self._fp = np.nan
+        self._fp_state: Any = None
+        self._t_acc = 0.0
 
     def rate(self, dt: float) -> float:
         """Damper slope [1/s]: the bound is ``rate * (d - d_s)``."""
@@ -189,22 +203,22 @@ class DistanceDamper(Constraint):
     def reset(self, state: RobotState) -> None:
         if self.model is not None:
             self.model.invalidate()
-        self._cache_key = None
+        self._fp_state = None
         self._scale.fill(1.0)
+        self._sqrt_scale.fill(1.0)
+        self._scaled = False
         self._pred_pairs = np.zeros(0, dtype=int)
 
     def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
         """Remember the first-order prediction of the active pairs' next distances."""
         model = self.model
-        if model is None or model.active.size == 0:
-            self._pred_pairs = np.zeros(0, dtype=int)
+        if self.trust_region is None or model is None or model.active.size == 0:
             return
+        t0 = time.perf_counter()
         act = model.active
-        if self.trust_region is not None:
-            self._pred_pairs = act.copy()
-            self._pred = model.distances[act] + (self._active_grad @ v) * dt
-        else:
-            self._pred_pairs = np.zeros(0, dtype=int)
+        self._pred_pairs = act
+        self._pred = model.distances[act] + self._grad_act @ (v * dt)
+        self.last_time += time.perf_counter() - t0
 
     def _row_mask(self, active: np.ndarray) -> np.ndarray:
         """Which active pairs get a row this tick (all of them unless a subclass disarms some)."""
@@ -213,28 +227,34 @@ class DistanceDamper(Constraint):
     # ------------------------------------------------------------------ per tick
     def _update(self, state: RobotState) -> None:
         """Distances and gradients of this tick, computed once per state/configuration."""
-        key = (id(state), id(state.q))
-        if key == self._cache_key and np.array_equal(self._q_cached, state.q):
+        fp = float(state.q @ self._fp_w)  # fingerprint of the configuration
+        if state is self._fp_state and fp == self._fp:
             return
+        t0 = time.perf_counter()
         model = self.model
         assert model is not None
         model.update(state, self.d_i)
-        self._active_grad = model.gradients(state)
-        self._cache_key = key
-        self._q_cached = state.q.copy()
+        act = model.active
+        self._grad_act = model.gradients(state) if act.size else self._grad_act[:0]
+        self._fp_state, self._fp = state, fp
         if self._pred_pairs.size:  # adapt the trust region to last tick's prediction error
             pairs = self._pred_pairs
             err = model.distances[pairs] - self._pred
-            ok = model.exact[pairs]
-            bad = ok & (err < -self.trust_region)
-            good = ok & ~bad
+            bad = err < -self.trust_region
             if bad.any():
                 # The step's error is first order in the step where facets switch, and the step
                 # goes as sqrt(scale): shrink by (eps / err)^2, at least by half.
                 f = np.clip((self.trust_region / err[bad]) ** 2, 1.0 / 64, 0.5)
-                self._scale[pairs[bad]] = np.maximum(self._scale[pairs[bad]] * f, MIN_TRUST_SCALE)
-            self._scale[pairs[good]] = np.minimum(self._scale[pairs[good]] * 1.25, 1.0)
-            self._pred_pairs = np.zeros(0, dtype=int)
+                pb = pairs[bad]
+                self._scale[pb] = np.maximum(self._scale[pb] * f, MIN_TRUST_SCALE)
+                self._scaled = True
+                pairs = pairs[~bad]
+            if self._scaled:
+                self._scale[pairs] = np.minimum(self._scale[pairs] * 1.25, 1.0)
+                np.sqrt(self._scale, out=self._sqrt_scale)
+                self._scaled = bool(self._scale.min() < 1.0)
+            self._pred_pairs = self._pred_pairs[:0]
+        self._t_acc = time.perf_counter() - t0
 
     def compute_bounds(self, state: RobotState, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
         r"""Trust region of the linearization: bounded rotation per tick near a close pair.
@@ -255,58 +275,68 @@ class DistanceDamper(Constraint):
         if self.trust_region is None:
             return None
         self._update(state)
-        model = self.model
-        assert model is not None
-        act = model.active
+        t0 = time.perf_counter()
+        act = self.model.active  # type: ignore[union-attr]
         if act.size == 0:
             return None
-        r = model.pair_levers(act)  # (k, nv)
-        with np.errstate(divide="ignore"):
-            b = np.sqrt((2.0 * self.trust_region) * self._scale[act, None] / r)  # inf where r = 0
-        ub = self._tr_ub
-        np.divide(b.min(axis=0), dt, out=ub)
-        np.negative(ub, out=self._tr_lb)
-        return self._tr_lb, ub
+        step = self._step0[act]
+        if self._scaled:
+            step = step * self._sqrt_scale[act, None]
+        np.multiply(step.min(axis=0), 1.0 / dt, out=self._tr_ub)
+        np.negative(self._tr_ub, out=self._tr_lb)
+        self._t_acc += time.perf_counter() - t0
+        return self._tr_lb, self._tr_ub
 
     def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
-        t0 = time.perf_counter()
         self._update(state)
+        t0 = time.perf_counter()
         model = self.model
         assert model is not None
-        C, lo, hi = self._C, self._l, self._u
-        if self._last_rows.size:  # clear last tick's rows only
-            C[self._last_rows] = 0.0
-            hi[self._last_rows] = np.inf
-            self._last_rows = np.zeros(0, dtype=int)
+        C, hi = self._C, self._u
+        last = self._last_rows
         act = model.active
-        d = model.distances
-        self.violations = {}
+        if last.size and (not self._direct or last.tobytes() != act.tobytes()):
+            C[last] = 0.0  # clear last tick's rows (unless the same rows are rewritten)
+            hi[last] = np.inf
         if act.size:
-            da = d[act]
-            self.min_distance = float(da.min())
-            keep = self._row_mask(act)
-            sel = np.flatnonzero(keep)
-            pairs = act[sel]
-            if self.max_rows is not None and pairs.size > self.n_rows:
-                closest = np.argsort(da[sel] - self.safety[pairs], kind="stable")[: self.n_rows]
-                sel = np.sort(sel[closest])
+            if self._direct:
+                rows = pairs = act
+                grad = self._grad_act
+            else:
+                sel = np.flatnonzero(self._row_mask(act))
                 pairs = act[sel]
-            rows = pairs if self.max_rows is None else np.arange(pairs.size)
-            gap = d[pairs] - self.safety[pairs]
-            C[rows] = -self._active_grad[sel]
-            hi[rows] = np.maximum(self.rate(dt) * gap, -self.recovery_speed)
-            self._last_rows = rows
-            self._last_pairs = pairs
-            bad = da < self.safety[act]
-            if bad.any():
-                for i in np.flatnonzero(bad).tolist():
-                    a, b = self.pairs[act[i]]
-                    self.violations[f"{a}/{b}"] = float(self.safety[act[i]] - da[i])
+                if self.max_rows is not None and pairs.size > self.n_rows:
+                    gap = model.distances[pairs] - self.safety[pairs]
+                    sel = np.sort(sel[np.argsort(gap, kind="stable")[: self.n_rows]])
+                    pairs = act[sel]
+                rows = pairs if self.max_rows is None else np.arange(pairs.size)
+                grad = self._grad_act[sel]
+            s = self._safety_scalar
+            gap = model.distances[pairs] - (self.safety[pairs] if s is None else s)
+            C[rows] = -grad
+            hi[rows] = np.maximum(gap * self.rate(dt), -self.recovery_speed)
+            self._last_rows, self._last_pairs, self._gap = rows, pairs, gap
         else:
-            self.min_distance = float(d.min()) if d.size else np.inf
-            self._last_pairs = np.zeros(0, dtype=int)
-        self.last_time = time.perf_counter() - t0
-        return ConstraintBlock(self.name, C, lo, hi)
+            self._last_rows = self._last_pairs = act
+            self._gap = self._gap[:0]
+        self.last_time = self._t_acc + time.perf_counter() - t0
+        return ConstraintBlock(self.name, C, self._l, hi)
+
+    @property
+    def min_distance(self) -> float:
+        """Smallest pair distance at the last tick [m] (a lower bound >= d_i if none is close)."""
+        d = self.model.distances if self.model is not None else np.zeros(0)
+        return float(d.min()) if d.size else np.inf
+
+    @property
+    def violations(self) -> dict[str, float]:
+        """Pairs closer than their safety distance at the last tick: ``"a/b"`` -> depth [m]."""
+        out = {}
+        for p, g in zip(self._last_pairs.tolist(), self._gap.tolist(), strict=True):
+            if g < 0:
+                a, b = self.pairs[p]
+                out[f"{a}/{b}"] = -g
+        return out
 
     def distances_and_gradients(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         r"""Pair distances and their gradients :math:`\partial d/\partial q` for this tick.
@@ -324,7 +354,7 @@ class DistanceDamper(Constraint):
         grad = self._grad
         grad.fill(0.0)
         if model.active.size:
-            grad[model.active] = self._active_grad
+            grad[model.active] = self._grad_act
         return model.distances.copy(), grad
 
     @property
