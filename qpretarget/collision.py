@@ -28,8 +28,10 @@ with :math:`\Delta q = q_1 \ominus q_0` and :math:`L_{gj}` the lever of velocity
 :math:`j` on body :math:`g` (1 for a translation; for a rotation, the length of the kinematic
 chain from the joint to the body plus the body's radius), so
 :math:`d_{ab} \ge d^{prev}_{ab} - m_a - m_b` is a lower bound that costs one matrix-vector
-product per tick. Exact distances are computed only where that bound is below the influence
-distance.
+product per tick. A coordinate that moves both bodies (a common ancestor: the base, the waist)
+moves them rigidly together and leaves their distance unchanged, so a pair's bound only sums the
+coordinates of the two branches below their common ancestor. Exact distances are computed only
+where that bound is below the influence distance.
 
 Distance gradient (witness points :math:`p_a, p_b`, unit normal :math:`n` from :math:`a` to
 :math:`b`, :math:`p_b - p_a = d\, n`): the witness points move with their bodies, so
@@ -40,7 +42,9 @@ Distance gradient (witness points :math:`p_a, p_b`, unit normal :math:`n` from :
 
 where :math:`J^W_x = [J^W_{v,x}; J^W_{\omega,x}]` is the WORLD-frame Jacobian of the body's joint
 (linear rows: velocity of the point at the world origin), i.e. ``data.J`` restricted to the
-joint's support. All rows of a tick are one ``(k, 6) @ (6, nv)`` product.
+joint's support :math:`S_x`. Since :math:`p_b \times n = p_a \times n`, both bodies share the
+coefficients :math:`c = [n;\ p_a \times n]` and all rows of a tick are one
+``(k, 6) @ (6, nv)`` product masked by :math:`S_b - S_a`.
 """
 
 from __future__ import annotations
