@@ -46,10 +46,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def demo_controller(robot: str, config: str | None = None):  # noqa: ANN201
-    """The demo's controller: ``config``, else ``configs/<robot>_whole_body.yaml``, else generated.
+    """The demo's controller, with the support sequences (stepping) on.
+
+    ``config`` when given; else the repository's ``configs/<robot>_whole_body.yaml`` completed
+    by :func:`~qpretarget.retarget.whole_body_config` with what stepping needs (CoM and sole
+    tasks, ``retarget.support``) if it lacks it; else a config generated from the robot's
+    registry entry (installed package without the repository's configs).
 
     Returns:
-        ``(controller, source)`` with ``source`` the file used or ``"generated"``.
+        ``(controller, source)`` with ``source`` saying which config was used.
     """
     import yaml
 
@@ -60,9 +65,11 @@ def demo_controller(robot: str, config: str | None = None):  # noqa: ANN201
         return Controller.from_yaml(config), str(config)
     path = CONFIGS / f"{robot}_whole_body.yaml"
     if path.is_file():
-        text = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-        if isinstance(text, dict) and text.get("retarget") is not None:
+        base = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        if (base.get("retarget") or {}).get("support"):
             return Controller.from_yaml(path), str(path)
+        cfg = whole_body_config(robot, base=base)
+        return Controller(cfg, base_dir=path.parent), f"{path} + support tasks"
     return Controller(whole_body_config(robot)), "generated (retarget.whole_body_config)"
 
 
