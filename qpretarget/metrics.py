@@ -303,6 +303,56 @@ def rnea_torques(
     ).reshape(len(q), robot.nv)
 
 
+def carry_base_wrench(
+    robot: RobotModel,
+    q: np.ndarray,
+    tau: np.ndarray,
+    support: np.ndarray,
+    foot_ids: Sequence[int],
+) -> np.ndarray:
+    r"""Actuated torques once the feet in support carry the floating base's wrench.
+
+    Inverse dynamics with a prescribed base motion puts the wrench that holds the robot up on the
+    (unactuated) base coordinates. With the supporting feet's contact wrenches :math:`f` the
+    equations of motion read :math:`	au = S^	op 	au_j + J_c^	op f`; the base rows fix
+    :math:`J_{c,b}^	op f = 	au_b` and the minimum-norm solution is taken (no internal forces
+    between the feet):
+
+    .. math:: f = (J_{c,b}^	op)^+ 	au_b, \qquad 	au_j = 	au_a - J_{c,a}^	op f,
+
+    with :math:`J_c` the LOCAL_WORLD_ALIGNED Jacobians of the sole frames (6 rows per foot),
+    split into base (``b``, first six columns) and actuated (``a``) parts. Samples without
+    support keep :math:`	au_a` (in flight the base wrench has to vanish anyway).
+
+    Args:
+        robot: the robot (free-flyer first).
+        q: (N, nq) configurations.
+        tau: (N, nv) generalized forces of inverse dynamics.
+        support: (N, F) feet in support.
+        foot_ids: (F,) sole frame ids.
+
+    Returns:
+        (N, nv - 6) actuated joint torques [N m].
+    """
+    nb = robot.root_nv
+    out = np.array(tau[:, nb:], dtype=float, copy=True)
+    if nb != 6:
+        return out
+    model = robot.model
+    data = model.createData()
+    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    for k in range(len(q)):
+        feet = [fid for fid, on in zip(foot_ids, support[k], strict=True) if on]
+        if not feet:
+            continue
+        pin.computeJointJacobians(model, data, q[k])
+        pin.updateFramePlacements(model, data)
+        Jc = np.vstack([pin.getFrameJacobian(model, data, fid, lwa) for fid in feet])
+        f = np.linalg.lstsq(Jc[:, :6].T, tau[k, :6], rcond=None)[0]  # minimum norm
+        out[k] -= Jc[:, 6:].T @ f
+    return out
+
+
 def solve_time_stats(solve_time: npt.ArrayLike | None) -> dict[str, float | None]:
     """Median, p95, max and mean of per-tick solve times, in [ms]."""
     if solve_time is None or len(solve_time) == 0:
@@ -494,7 +544,8 @@ class MetricSeries:
             horizontal displacement since the start of the current support phase [m] (``nan``
             while not in contact); foot_lift: foot -> (T,) vertical displacement [m].
         power_index: (N,) samples of the power; power: (N,) |tau' qdot| of the actuated joints
-            [W]; power_with_base: including the floating base's virtual wrench [W];
+            with the base wrench carried by the feet in support (:func:`carry_base_wrench`) [W];
+            power_base_held: the same with the base held in place (no contact forces) [W];
             power_source: ``"tau"`` (stored torques) or ``"rnea"``.
         peaks: ``velocity``/``acceleration``/``jerk`` -> (n,) per-joint peaks.
         v_max: (n,) joint velocity limits [rad/s].
@@ -526,7 +577,7 @@ class MetricSeries:
     foot_lift: dict[str, np.ndarray]
     power_index: np.ndarray
     power: np.ndarray
-    power_with_base: np.ndarray
+    power_base_held: np.ndarray
     power_source: str
     peaks: dict[str, np.ndarray]
     v_max: np.ndarray
@@ -753,8 +804,13 @@ def compute_series(
     else:
         tau = rnea_torques(robot, q[idx], qdot, qddot)
         source = "rnea"
-    power = instantaneous_power(tau[:, vi], qdot[:, vi]) if len(idx) else np.zeros(0)
-    power_all = instantaneous_power(tau, qdot) if len(idx) else np.zeros(0)
+    if len(idx):
+        # Joint torques of a robot standing on its feet (CRAC eq. 43 sums the actuated joints).
+        tau_j = carry_base_wrench(robot, q[idx], tau, contacts[idx], foot_ids)
+        power = instantaneous_power(tau_j, qdot[:, robot.root_nv :])
+        power_held = instantaneous_power(tau[:, vi], qdot[:, vi])
+    else:
+        power = power_held = np.zeros(0)
 
     recorded = {k: np.asarray(v, float) for k, v in traj.actual.items() if k in reached}
     name = traj.meta.get("config_name") or getattr(controller, "config", {}).get("name") or ""
@@ -783,7 +839,7 @@ def compute_series(
         foot_lift=lift,
         power_index=idx,
         power=power,
-        power_with_base=power_all,
+        power_base_held=power_held,
         power_source=source,
         peaks=peaks,
         v_max=robot.v_max[vi],
@@ -957,9 +1013,10 @@ def summarize(series: MetricSeries, *, per_frame: bool = True) -> dict[str, Any]
     }
     power = {
         "mean_abs_power_W": _f(np.mean(s.power)) if s.power.size else None,
-        "mean_abs_power_with_base_W": _f(np.mean(s.power_with_base)) if s.power.size else None,
+        "mean_abs_power_base_held_W": _f(np.mean(s.power_base_held)) if s.power.size else None,
         "peak_power_W": _f(np.max(s.power)) if s.power.size else None,
         "source": s.power_source,
+        "contact_forces": "minimum-norm wrenches of the feet in support",
         "samples": int(s.power.size),
     }
     status = {}

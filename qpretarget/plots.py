@@ -369,12 +369,10 @@ def plot_power(
         ax.axhline(mean, color=col, ls="--", lw=1.2, label=f"{label}: mean {mean:.2f} W")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("power [W]")
-    src = (
-        "stored torques"
-        if series.power_source == "tau"
-        else "RNEA torques from finite-difference q"
+    src = "controller torques" if series.power_source == "tau" else "RNEA on finite-difference q"
+    ax.set_title(
+        f"Power of the actuated joints ({src}; base wrench carried by the feet)", fontsize=10
     )
-    ax.set_title(f"Absolute joint power of the actuated joints ({src})", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right", fontsize=8)
     labels = [r[0] for r in runs]

@@ -294,7 +294,7 @@ def experiments(args: argparse.Namespace) -> dict[str, Any]:
     from qpretarget.plots import plot_joint_angles, plot_pair_distances, plot_violations
 
     out: Path = args.out
-    figs = out / "figures"
+    figs: Path = args.figures or out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
     clips = ["reaching"] if args.quick else list(args.clips)
     task_sets = (2,) if args.quick else (1, 2)
@@ -332,16 +332,16 @@ def experiments(args: argparse.Namespace) -> dict[str, Any]:
     if "reaching" in clips:
         ts_h = 2 if 2 in task_sets else task_sets[0]
         b, a = keep[("reaching", ts_h, "before")], keep[("reaching", ts_h, "after")]
-        results["figures"]["histogram"] = str(
+        results["figures"]["histogram"] = _name(
             plot_violations(a, figs / "violations_reaching.png", before=b)
         )
         ts_f = 1 if 1 in task_sets else task_sets[0]
         a1 = keep[("reaching", ts_f, "after")]
         b1 = keep[("reaching", ts_f, "before")]
-        results["figures"]["distances"] = str(
+        results["figures"]["distances"] = _name(
             plot_pair_distances(a1, figs / "pair_distances_reaching.png", before=b1)
         )
-        results["figures"]["joint_angles"] = str(
+        results["figures"]["joint_angles"] = _name(
             plot_joint_angles(a1, figs / "joint_angles_reaching.png")
         )
         if not args.quick:
@@ -349,7 +349,7 @@ def experiments(args: argparse.Namespace) -> dict[str, Any]:
                 {f"ts{t}": keep[("reaching", t, "after")] for t in task_sets},
                 figs / "wrist_tracking.png",
             )
-            results["figures"]["wrist_tracking"] = str(figs / "wrist_tracking.png")
+            results["figures"]["wrist_tracking"] = _name(figs / "wrist_tracking.png")
             base3 = with_self_collision(load_config(3, args.level))
             s3, _ = run(base3, CLIPS["reaching"], seconds, out, "reaching_ts3_after")
             s3n, _ = run(
@@ -360,12 +360,12 @@ def experiments(args: argparse.Namespace) -> dict[str, Any]:
                 "reaching_ts3_no_avoidance",
             )
             fig_ts3(s3, s3n, figs / "ts3_collision_tracking.png")
-            results["figures"]["ts3"] = str(figs / "ts3_collision_tracking.png")
+            results["figures"]["ts3"] = _name(figs / "ts3_collision_tracking.png")
     if not args.quick:
         fig_violation_bars(results, figs / "violations_before.png")
         fig_power(results, figs / "power.png")
-        results["figures"]["violation_bars"] = str(figs / "violations_before.png")
-        results["figures"]["power"] = str(figs / "power.png")
+        results["figures"]["violation_bars"] = _name(figs / "violations_before.png")
+        results["figures"]["power"] = _name(figs / "power.png")
     return results
 
 
@@ -471,6 +471,11 @@ def results_markdown(results: dict[str, Any], fig_rel: str) -> str:
     return "\n".join(lines)
 
 
+def _name(path: Any) -> str:
+    """File name of a figure (results.json holds no machine paths)."""
+    return Path(path).name
+
+
 def _row(*cells: Any) -> str:
     return "| " + " | ".join(str(c) for c in cells) + " |"
 
@@ -498,17 +503,17 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.quick and args.seconds == 10.0:
         args.seconds = 2.0
+    args.figures = None
     if args.write_docs:
-        args.out = REPO / "docs" / "figures" / "results"
+        # Figures and results.json into the docs; the runs stay in --out (not in the repository).
+        args.figures = REPO / "docs" / "figures" / "results"
     args.out.mkdir(parents=True, exist_ok=True)
     results = experiments(args)
     (args.out / "results.json").write_text(json.dumps(results, indent=1), encoding="utf-8")
     if args.write_docs:
-        md = results_markdown(results, "figures/results/figures")
+        (args.figures / "results.json").write_text(json.dumps(results, indent=1), encoding="utf-8")
+        md = results_markdown(results, "figures/results")
         (REPO / "docs" / "results.md").write_text(md, encoding="utf-8")
-        for run_file in (args.out / "runs").glob("*.npz"):
-            run_file.unlink()  # runs are reproducible; keep the repository small
-        (args.out / "runs").rmdir()
     if args.quick:
         ok = True
         for clip, sets in results["kinematic"].items():

@@ -16,12 +16,14 @@ from qpretarget.metrics import (
     GeometryPairDistances,
     MetricsError,
     average_absolute_power,
+    carry_base_wrench,
     compute_metrics,
     compute_series,
     convex_hull_2d,
     derivative_peaks,
     joint_limit_violations,
     rmse,
+    rnea_torques,
     signed_distance_to_polygon,
     solve_time_stats,
     summarize,
@@ -193,6 +195,33 @@ def test_power_from_rnea_matches_pinocchio(ctrl):
     # Constant joint velocity: finite differences give v exactly and a = 0 up to rounding / dt^2.
     np.testing.assert_allclose(s.power, expected, rtol=1e-6, atol=1e-8)
     assert s.power.mean() > 0.01  # the arm is lifted against gravity
+    # The feet carry the base wrench through the legs only: the arm's torques are unchanged.
+    np.testing.assert_allclose(s.power_base_held, s.power, rtol=1e-9, atol=1e-12)
+
+
+def test_feet_carry_the_weight_of_a_standing_robot(ctrl):
+    robot = ctrl.robot
+    q = still(ctrl, 3)
+    feet = [robot.frame_id(robot.feet[f].frame) for f in ("left_foot", "right_foot")]
+    zero = np.zeros((3, robot.nv))
+    tau = rnea_torques(robot, q, zero, zero)
+    tau_j = carry_base_wrench(robot, q, tau, np.ones((3, 2), bool), feet)
+    # What the joints do not provide, the two contact wrenches do: tau - [0; tau_j] = Jc' f.
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, q[0])
+    pin.updateFramePlacements(robot.model, data)
+    Jc = np.vstack(
+        [pin.getFrameJacobian(robot.model, data, f, pin.LOCAL_WORLD_ALIGNED) for f in feet]
+    )
+    r = tau[0] - np.concatenate([np.zeros(6), tau_j[0]])
+    f, *_ = np.linalg.lstsq(Jc.T, r, rcond=None)
+    np.testing.assert_allclose(Jc.T @ f, r, atol=1e-8)  # exactly carried (rounding of 1e2 N m)
+    # Static standing: the vertical contact forces add up to the robot's weight m g.
+    weight = pin.computeTotalMass(robot.model) * 9.81
+    assert f[2] + f[8] == pytest.approx(weight, rel=1e-9)
+    # ... and the knees hold it: without the contact forces they would carry nothing.
+    knee = robot.joint_names.index("left_knee_joint")
+    assert abs(tau[0, 6 + knee]) < 1.0 < abs(tau_j[0, knee])
 
 
 # ---------------------------------------------------------------------------------- tracking
