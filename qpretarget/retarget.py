@@ -1012,6 +1012,12 @@ class Retargeter:
                 progress(k + 1, total)
         if bar is not None:
             bar.close()
+        if self.calibration is None:
+            raise RetargetError(
+                f"{motion.source or 'the motion'}: the waist key-point is missing in every frame "
+                f"of the excerpt (or in fewer than calibration.frames = "
+                f"{self.spec.calibration_frames}); nothing to calibrate the scaling on"
+            )
         return self.trajectory()
 
     # -------------------------------------------------------------------- online
@@ -1155,6 +1161,7 @@ class Retargeter:
         self.calibration: Calibration | None = None
         self.scaler: Scaler | None = None
         self._pending: list[tuple[float, np.ndarray]] = []
+        self._calibration_samples: list[tuple[float, np.ndarray]] = []
         self._records: dict[str, list[Any]] = {
             k: []
             for k in ("t", "q", "v", "status", "solve_time", "tau", "contacts", "phase",
@@ -1215,10 +1222,15 @@ class Retargeter:
     def _tick(self, t: float, y: np.ndarray) -> list[Command]:
         """Process one control-rate sample (after the first ``calibration.frames``, all held)."""
         if self.calibration is None:
+            # Calibrate on the first `calibration.frames` samples where the waist is seen (marker
+            # data may start with gaps); the samples before are then run with missing targets.
             self._pending.append((t, y))
-            if len(self._pending) < self.spec.calibration_frames:
+            kp, _, missing = self._stream.unpack(y)
+            if not missing.get("waist", True) and np.all(np.isfinite(kp["waist"])):
+                self._calibration_samples.append((t, y))
+            if len(self._calibration_samples) < self.spec.calibration_frames:
                 return []
-            self._calibrate(self._pending)
+            self._calibrate(self._calibration_samples)
             pending, self._pending = self._pending, []
             return [self._process(tp, yp) for tp, yp in pending]
         return [self._process(t, y)]
@@ -1428,9 +1440,13 @@ class Retargeter:
                     p_t = scaled[k] + off
                     if ramp < 1.0:
                         p_t = p_ref + ramp * (p_t - p_ref)
-            if p_t is not None and R_t is not None:
+            # A pose task whose orientation (or position) is missing keeps tracking the other
+            # half; a missing half keeps its last target.
+            p_ok = p_t is not None and bool(np.all(np.isfinite(p_t)))
+            R_ok = R_t is not None and bool(np.all(np.isfinite(R_t)))
+            if p_ok and R_ok:
                 targets[name] = _pose_matrix(R_t, p_t)
-            elif p_t is not None:
+            elif p_ok or (p_t is not None and not R_ok):
                 targets[name] = p_t
             else:
                 targets[name] = R_t

@@ -226,7 +226,8 @@ class Scaler:
             support: ``"left"``, ``"right"`` or ``"double"``: which robot feet are on the ground
                 (Poubel: the root of the walk).
             anchors: side -> robot ankle position [m] of the feet on the ground. Without anchors
-                (or without legs), Poubel scaling is rooted at the waist placed like Dariush's.
+                (without legs, or when the person's legs are missing in this sample), Poubel
+                scaling is rooted at the waist, placed like Dariush's.
 
         Returns:
             Scaled key-points, name -> ``(3,)``.
@@ -234,10 +235,17 @@ class Scaler:
         if self.method == "dariush":
             return self.scale_dariush(human)
         if anchors and self.has_legs:
+            out = None
             if support == "double" and "left" in anchors and "right" in anchors:
-                return self.scale_double_support(human, anchors["left"], anchors["right"])
-            if support in ("left", "right") and support in anchors:
-                return self.scale_rooted(human, f"{support}_ankle", anchors[support])
+                out = self.scale_double_support(human, anchors["left"], anchors["right"])
+            elif support in ("left", "right") and support in anchors:
+                out = self.scale_rooted(human, f"{support}_ankle", anchors[support])
+            # Legs not seen (marker gaps): the chain from the feet is undefined, so the body is
+            # placed from the waist as without anchors.
+            if out is not None and (
+                np.all(np.isfinite(out["waist"])) or not np.all(np.isfinite(human["waist"]))
+            ):
+                return out
         cal = self.calibration
         waist = cal.robot_waist + cal.root_scale * (self._R @ (human["waist"] - cal.human_waist))
         return self.scale_rooted(human, "waist", waist)
