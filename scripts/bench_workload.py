@@ -219,6 +219,23 @@ def evaluate(wl: dict[str, Any], tg: Any, q: np.ndarray, robot: Any) -> dict[str
     }
 
 
+def reference_piece(wl: dict[str, Any], tg: Any, robot: Any) -> float:
+    """Median [µs] of updateGeometryPlacements + computeDistances over the 20 hull pairs on
+    consecutive reference configurations: RESULTS-anchors.md measured 18.7 µs for this piece, so
+    the ratio calibrates this run's machine load against the anchors' run."""
+    cm = CollisionModel(robot, [tuple(p) for p in wl["collision"]["pairs"]], broad_phase=False)
+    state = RobotState(robot)
+    times = []
+    for _ in range(2):
+        for k in range(len(tg["q_ref"])):
+            state.update(tg["q_ref"][k])
+            t0 = time.perf_counter()
+            pin.updateGeometryPlacements(robot.model, state.data, cm.gmodel, cm.gdata)
+            pin.computeDistances(cm.gmodel, cm.gdata)
+            times.append(time.perf_counter() - t0)
+    return float(np.median(times[len(tg["q_ref"]) :]) * 1e6)
+
+
 def row(r: dict[str, Any], m: dict[str, Any], label: str) -> str:
     """One markdown row in the anchors' column order."""
     return (
@@ -280,8 +297,16 @@ def main() -> None:
             {**{k: v for k, v in r.items() if k not in ("controller", "q")},
              **{k: v for k, v in m.items() if k != "pair_distances"}}
         )  # fmt: skip
+    ref = reference_piece(wl, tg, r["controller"].robot)
+    print(
+        f"\nreference piece (updateGeometryPlacements + computeDistances, 20 hull pairs, "
+        f"consecutive ticks): {ref:.1f} µs now, 18.7 µs in RESULTS-anchors.md "
+        f"(load factor {ref / 18.7:.2f})"
+    )
     if args.json:
-        Path(args.json).write_text(json.dumps({"machine": info, "results": out}, indent=2))
+        Path(args.json).write_text(
+            json.dumps({"machine": info, "reference_piece_us": ref, "results": out}, indent=2)
+        )
 
 
 if __name__ == "__main__":

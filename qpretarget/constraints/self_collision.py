@@ -167,7 +167,8 @@ class DistanceDamper(Constraint):
         self._l = np.full(self.n_rows, -np.inf)
         self._u = np.full(self.n_rows, np.inf)
         self._grad = np.zeros((P, robot.nv))
-        self._grad_act = np.zeros((0, robot.nv))
+        self._grad_act = np.zeros((0, robot.nv))  # rows' gradients dd/dq (k, nv)
+        self._row_pairs = np.zeros(0, dtype=int)  # pairs with a row this tick
         self._tr_lb = np.full(robot.nv, -np.inf)
         self._tr_ub = np.full(robot.nv, np.inf)
         self._scale = np.ones(P)
@@ -212,12 +213,12 @@ class DistanceDamper(Constraint):
     def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
         """Remember the first-order prediction of the active pairs' next distances."""
         model = self.model
-        if self.trust_region is None or model is None or model.active.size == 0:
+        if self.trust_region is None or model is None or self._row_pairs.size == 0:
             return
         t0 = time.perf_counter()
-        act = model.active
-        self._pred_pairs = act
-        self._pred = model.distances[act] + self._grad_act @ (v * dt)
+        pairs = self._row_pairs
+        self._pred_pairs = pairs
+        self._pred = model.distances[pairs] + self._grad_act @ (v * dt)
         self.last_time += time.perf_counter() - t0
 
     def _row_mask(self, active: np.ndarray) -> np.ndarray:
@@ -235,7 +236,18 @@ class DistanceDamper(Constraint):
         assert model is not None
         model.update(state, self.d_i)
         act = model.active
-        self._grad_act = model.gradients(state) if act.size else self._grad_act[:0]
+        grad = model.gradients(state) if act.size else self._grad_act[:0]
+        if self._direct or act.size == 0:
+            pairs = act
+        else:  # the pairs that get a row this tick (armed, closest max_rows)
+            sel = np.flatnonzero(self._row_mask(act))
+            pairs = act[sel]
+            if self.max_rows is not None and pairs.size > self.n_rows:
+                gap = model.distances[pairs] - self.safety[pairs]
+                sel = np.sort(sel[np.argsort(gap, kind="stable")[: self.n_rows]])
+                pairs = act[sel]
+            grad = grad[sel]
+        self._grad_act, self._row_pairs = grad, pairs
         self._fp_state, self._fp = state, fp
         if self._pred_pairs.size:  # adapt the trust region to last tick's prediction error
             pairs = self._pred_pairs
@@ -276,12 +288,12 @@ class DistanceDamper(Constraint):
             return None
         self._update(state)
         t0 = time.perf_counter()
-        act = self.model.active  # type: ignore[union-attr]
-        if act.size == 0:
+        pairs = self._row_pairs
+        if pairs.size == 0:
             return None
-        step = self._step0[act]
+        step = self._step0[pairs]
         if self._scaled:
-            step = step * self._sqrt_scale[act, None]
+            step = step * self._sqrt_scale[pairs, None]
         np.multiply(step.min(axis=0), 1.0 / dt, out=self._tr_ub)
         np.negative(self._tr_ub, out=self._tr_lb)
         self._t_acc += time.perf_counter() - t0
@@ -294,30 +306,19 @@ class DistanceDamper(Constraint):
         assert model is not None
         C, hi = self._C, self._u
         last = self._last_rows
-        act = model.active
-        if last.size and (not self._direct or last.tobytes() != act.tobytes()):
+        pairs = self._row_pairs
+        rows = pairs if self.max_rows is None else np.arange(pairs.size)
+        if last.size and last.tobytes() != rows.tobytes():
             C[last] = 0.0  # clear last tick's rows (unless the same rows are rewritten)
             hi[last] = np.inf
-        if act.size:
-            if self._direct:
-                rows = pairs = act
-                grad = self._grad_act
-            else:
-                sel = np.flatnonzero(self._row_mask(act))
-                pairs = act[sel]
-                if self.max_rows is not None and pairs.size > self.n_rows:
-                    gap = model.distances[pairs] - self.safety[pairs]
-                    sel = np.sort(sel[np.argsort(gap, kind="stable")[: self.n_rows]])
-                    pairs = act[sel]
-                rows = pairs if self.max_rows is None else np.arange(pairs.size)
-                grad = self._grad_act[sel]
+        if pairs.size:
             s = self._safety_scalar
             gap = model.distances[pairs] - (self.safety[pairs] if s is None else s)
-            C[rows] = -grad
+            C[rows] = -self._grad_act
             hi[rows] = np.maximum(gap * self.rate(dt), -self.recovery_speed)
             self._last_rows, self._last_pairs, self._gap = rows, pairs, gap
         else:
-            self._last_rows = self._last_pairs = act
+            self._last_rows = self._last_pairs = pairs
             self._gap = self._gap[:0]
         self.last_time = self._t_acc + time.perf_counter() - t0
         return ConstraintBlock(self.name, C, self._l, hi)
@@ -346,15 +347,16 @@ class DistanceDamper(Constraint):
 
         Returns:
             ``(d (P,), grad (P, nv))``: exact distances of the pairs closer than :math:`d_i`
-            (lower bounds :math:`\ge d_i` for the others, whose gradient rows are zero).
+            (lower bounds :math:`\ge d_i` for the others); gradient rows of the pairs with a QP
+            row this tick, zero for the others.
         """
         self._update(state)
         model = self.model
         assert model is not None
         grad = self._grad
         grad.fill(0.0)
-        if model.active.size:
-            grad[model.active] = self._grad_act
+        if self._row_pairs.size:
+            grad[self._row_pairs] = self._grad_act
         return model.distances.copy(), grad
 
     @property
