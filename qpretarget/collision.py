@@ -49,6 +49,7 @@ coefficients :math:`c = [n;\ p_a \times n]` and all rows of a tick are one
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -162,6 +163,7 @@ class LinkShape:
         radius: largest distance from the parent joint's origin to a point of the shape [m].
         n_vertices: vertices of a hull (0 for primitives).
         sources: names of the URDF geometry objects it replaces.
+        inflation: swept-sphere radius added to a lighter hull [m] (0 otherwise).
     """
 
     name: str
@@ -173,6 +175,7 @@ class LinkShape:
     radius: float
     n_vertices: int = 0
     sources: tuple[str, ...] = ()
+    inflation: float = 0.0
 
     def geometry_object(self) -> pin.GeometryObject:
         """A pinocchio ``GeometryObject`` of this shape."""
@@ -226,21 +229,44 @@ def _rotation_z_to(a: np.ndarray) -> np.ndarray:
 _SHAPES_CACHE: dict[tuple[str, bool, str], dict[str, LinkShape]] = {}
 
 
-def link_shapes(robot: RobotModel, geometry: str = "convex_hull") -> dict[str, LinkShape]:
+def link_shapes(
+    robot: RobotModel, geometry: str = "convex_hull", hull_vertices: int | None = None
+) -> dict[str, LinkShape]:
     """Simplified collision shape of every link that has collision geometry, built once.
 
     Args:
         robot: the robot.
         geometry: ``convex_hull`` or ``capsule`` (primitives are kept in both cases).
+        hull_vertices: ``convex_hull`` only: hulls with more vertices are replaced by a
+            conservative lighter one (:func:`lighter_hull`); ``None`` keeps the exact hulls.
 
     Returns:
         Link name -> :class:`LinkShape`, in the URDF's geometry order.
 
     Raises:
-        ConfigError: unknown ``geometry``.
+        ConfigError: unknown ``geometry`` or a bad ``hull_vertices``.
     """
     if geometry not in GEOMETRIES:
         raise ConfigError(f"geometry must be one of {', '.join(GEOMETRIES)}, got {geometry!r}.")
+    if hull_vertices is not None:
+        if (
+            isinstance(hull_vertices, bool)
+            or not isinstance(hull_vertices, int)
+            or hull_vertices < 8
+        ):
+            raise ConfigError(
+                f"hull_vertices must be an integer >= 8 or null, got {hull_vertices!r}."
+            )
+        key_l = (str(robot.urdf_path), bool(robot.free_flyer), geometry, hull_vertices)
+        if key_l not in _SHAPES_CACHE:
+            exact = link_shapes(robot, geometry)
+            _SHAPES_CACHE[key_l] = {  # type: ignore[index]
+                n: lighter_hull(sh, hull_vertices)
+                if sh.kind == "convex_hull" and sh.n_vertices > hull_vertices
+                else sh
+                for n, sh in exact.items()
+            }
+        return _SHAPES_CACHE[key_l]  # type: ignore[index]
     key = (str(robot.urdf_path), bool(robot.free_flyer), geometry)
     if key in _SHAPES_CACHE:
         return _SHAPES_CACHE[key]
@@ -290,6 +316,39 @@ def link_shapes(robot: RobotModel, geometry: str = "convex_hull") -> dict[str, L
             )  # fmt: skip
     _SHAPES_CACHE[key] = shapes
     return shapes
+
+
+def lighter_hull(shape: LinkShape, n_vertices: int) -> LinkShape:
+    r"""A hull with at most ``n_vertices`` vertices that still contains ``shape``'s hull.
+
+    The hull :math:`H'` of ``n_vertices`` of the hull's vertices chosen by farthest-point
+    sampling lies inside the hull :math:`H`; it is inflated by the largest distance
+    :math:`\delta` from a vertex of :math:`H` to :math:`H'` (coal's swept-sphere radius), so
+    :math:`H \subset H' \oplus B(\delta)`: distances stay conservative, by at most
+    :math:`2\delta` per pair. GJK's cost grows with the vertex count (G1's 20 workload hulls:
+    about 40% less time with 128 vertices).
+    """
+    P = np.asarray(shape.geometry.points(), dtype=float)
+    idx = [0]
+    dist = np.linalg.norm(P - P[0], axis=1)
+    for _ in range(n_vertices - 1):
+        i = int(np.argmax(dist))
+        idx.append(i)
+        np.minimum(dist, np.linalg.norm(P - P[i], axis=1), out=dist)
+    light = coal.Convex.convexHull(_vec3s(P[idx]), False, "Qt")
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    point, tf = coal.Sphere(1e-12), coal.Transform3s()
+    delta = 0.0
+    for x in P:
+        tf.setTranslation(x)
+        res.clear()  # a DistanceResult keeps the smallest distance of successive calls
+        delta = max(delta, coal.distance(point, tf, light, coal.Transform3s(), req, res))
+    delta += 1e-6  # GJK tolerance
+    light.setSweptSphereRadius(delta)
+    return dataclasses.replace(
+        shape, geometry=light, radius=shape.radius + delta, n_vertices=int(light.num_points),
+        inflation=delta,
+    )  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------
@@ -466,6 +525,8 @@ class CollisionModel:
             distance (conservative; ``False`` computes every pair every call).
         hysteresis: a pair computed at the last call stays computed while its bound is below
             the influence distance plus this [m] (saves switching pairs on and off).
+        hull_vertices: use conservative lighter hulls of at most this many vertices
+            (:func:`lighter_hull`); ``None``: exact hulls.
         path: YAML path for error messages.
 
     Raises:
@@ -481,12 +542,13 @@ class CollisionModel:
         obstacles: Sequence[LinkShape] = (),
         broad_phase: bool = True,
         hysteresis: float = 0.0,
+        hull_vertices: int | None = None,
         path: str = "",
     ) -> None:
         self.robot = robot
         self.hysteresis = float(hysteresis)
         self.geometry = geometry
-        shapes = link_shapes(robot, geometry)
+        shapes = link_shapes(robot, geometry, hull_vertices)
         known = dict(shapes)
         for ob in obstacles:
             if ob.name in known:

@@ -101,13 +101,19 @@ def test_primitive_point_sets_contain_the_primitive(geom):
     # at least the primitive's (computed by coal's distance to a far plane). 1e-9: rounding.
     hull = coal.Convex.convexHull(_vec3s(primitive_points(geom)), False, "Qt")
     rng = np.random.default_rng(2)
-    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    req = coal.DistanceRequest()
     for u in rng.standard_normal((50, 3)):
         u /= np.linalg.norm(u)
         plane = coal.Halfspace(-u, -10.0)  # solid {x : u'x >= 10}
-        d_prim = coal.distance(geom, coal.Transform3s(), plane, coal.Transform3s(), req, res)
-        d_hull = coal.distance(hull, coal.Transform3s(), plane, coal.Transform3s(), req, res)
+        # A fresh DistanceResult per call: a result keeps the smallest distance it has seen.
+        d_prim = coal.distance(
+            geom, coal.Transform3s(), plane, coal.Transform3s(), req, coal.DistanceResult()
+        )
+        d_hull = coal.distance(
+            hull, coal.Transform3s(), plane, coal.Transform3s(), req, coal.DistanceResult()
+        )
         assert d_hull <= d_prim + 1e-9
+        assert d_hull > d_prim - 0.35 * max(d_prim, 10.0 - d_prim)  # and not absurdly loose
 
 
 def _vec3s(points):
@@ -140,6 +146,26 @@ def test_distance_gradient_matches_finite_differences(g1, workload):
         state.update(pin.integrate(g1.model, q0, h * dv))
         d1 = cm.update(state, 1.0)[act]
         np.testing.assert_allclose((d1 - d0) / h, G @ dv, atol=2e-5 * np.linalg.norm(dv))
+
+
+def test_lighter_hulls_are_conservative(g1, workload):
+    # Lighter hulls (128 vertices + swept-sphere inflation) contain the exact hulls: their
+    # distances are never larger (1e-6: GJK tolerance) and lose at most 2 inflations.
+    wl, tg = workload
+    pairs = [tuple(p) for p in wl["collision"]["pairs"]]
+    exact = CollisionModel(g1, pairs, broad_phase=False)
+    light = CollisionModel(g1, pairs, broad_phase=False, hull_vertices=128)
+    slack = np.array(
+        [light.shapes[light.bodies.index(a)].inflation + light.shapes[light.bodies.index(b)].inflation
+         for a, b in pairs]
+    )  # fmt: skip
+    assert all(s.n_vertices <= 128 for s in light.shapes)
+    state = RobotState(g1)
+    for k in (0, 300, 600, 900):
+        state.update(tg["q_ref"][k])
+        d0, d1 = exact.compute_all(state)[0], light.compute_all(state)[0]
+        assert np.all(d1 <= d0 + 1e-6)
+        assert np.all(d1 >= d0 - slack - 1e-6)
 
 
 def test_broad_phase_is_conservative(g1, workload):

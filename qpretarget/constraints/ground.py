@@ -59,6 +59,7 @@ class Ground(DistanceDamper):
         max_rows: cap on the QP rows (default one per pair).
         broad_phase: skip pairs that provably stay beyond :math:`d_i`.
         trust_region: tolerated linearization error [m] (see :mod:`.self_collision`).
+        hull_vertices: lighter conservative hulls (see :mod:`.self_collision`).
         name: constraint name.
 
     Raises:
@@ -86,12 +87,14 @@ class Ground(DistanceDamper):
         max_rows: int | None = None,
         broad_phase: bool = True,
         trust_region: float | None = 2e-4,
+        hull_vertices: int | None = None,
         name: str | None = None,
     ) -> None:
         super().__init__(
             d_s=margin, d_i=d_i, xi=xi, gain=gain, gain_per_tick=gain_per_tick,
             recovery_speed=recovery_speed, geometry=geometry, max_rows=max_rows,
-            broad_phase=broad_phase, trust_region=trust_region, name=name,
+            broad_phase=broad_phase, trust_region=trust_region, hull_vertices=hull_vertices,
+            name=name,
         )  # fmt: skip
         if links is not None and (isinstance(links, str) or not isinstance(links, Sequence)):
             raise ConfigError(f"links must be a list of link names, got {links!r}.")
@@ -180,7 +183,7 @@ class Ground(DistanceDamper):
         self.n_ground = len(links)
         self.model = CollisionModel(
             robot, pairs, geometry=self.geometry, obstacles=[ground, *self.obstacles],
-            broad_phase=self.broad_phase, path=f"{p}links",
+            broad_phase=self.broad_phase, hull_vertices=self.hull_vertices, path=f"{p}links",
         )  # fmt: skip
         self.safety = np.array(
             [self.d_s] * self.n_ground + [self.obstacle_margin] * (len(pairs) - self.n_ground)

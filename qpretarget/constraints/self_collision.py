@@ -122,9 +122,11 @@ class DistanceDamper(Constraint):
         max_rows: int | None,
         broad_phase: bool,
         trust_region: float | None,
+        hull_vertices: int | None,
         name: str | None,
     ) -> None:
         super().__init__(name)
+        self.hull_vertices = hull_vertices
         self.trust_region = (
             None if trust_region is None else positive_float(trust_region, "trust_region [m]")
         )
@@ -392,6 +394,8 @@ class SelfCollision(DistanceDamper):
         trust_region: tolerated second-order error of the linearization [m]: while a pair is
             within :math:`d_i` the rotations moving its links are bounded per tick
             (:meth:`DistanceDamper.compute_bounds`); ``null`` turns the bound off.
+        hull_vertices: lighter conservative hulls of at most this many vertices (faster GJK,
+            distances smaller by at most twice their inflation); ``null``: exact hulls.
         name: constraint name.
 
     Raises:
@@ -418,12 +422,14 @@ class SelfCollision(DistanceDamper):
         max_rows: int | None = None,
         broad_phase: bool = True,
         trust_region: float | None = 2e-4,
+        hull_vertices: int | None = None,
         name: str | None = None,
     ) -> None:
         super().__init__(
             d_s=d_s, d_i=d_i, xi=xi, gain=gain, gain_per_tick=gain_per_tick,
             recovery_speed=recovery_speed, geometry=geometry, max_rows=max_rows,
-            broad_phase=broad_phase, trust_region=trust_region, name=name,
+            broad_phase=broad_phase, trust_region=trust_region, hull_vertices=hull_vertices,
+            name=name,
         )  # fmt: skip
         if isinstance(pairs, str):
             if pairs != "auto":
@@ -495,8 +501,9 @@ class SelfCollision(DistanceDamper):
         if self.max_rows is None and self._pairs_spec == "auto":
             self.max_rows = AUTO_MAX_ROWS
         self.model = CollisionModel(
-            robot, pairs, geometry=self.geometry, broad_phase=self.broad_phase, path=f"{p}pairs"
-        )
+            robot, pairs, geometry=self.geometry, broad_phase=self.broad_phase,
+            hull_vertices=self.hull_vertices, path=f"{p}pairs",
+        )  # fmt: skip
         self.safety = np.full(len(pairs), self.d_s)
         # Distances in the reference posture (reported by describe()).
         state = RobotState(robot)
