@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -49,7 +49,9 @@ from .problem import QPProblem
 from .solvers import ProxSuiteSolver, make_solver
 from .validation import positive_float
 
-_KEYS = ("enabled", "ratio", "report_tolerance", "solver")
+_KEYS = ("enabled", "ratio", "report_tolerance", "solver", "hard")
+#: Bound constraints the fallback never widens by default: the actuators' velocity limits.
+DEFAULT_HARD = ("velocity_limits",)
 
 
 @dataclasses.dataclass(slots=True)
@@ -122,7 +124,32 @@ def make_fallback(controller: Any, spec: Mapping[str, Any] | None) -> Fallback |
         if solver_spec is None
         else make_solver(solver_spec, path="fallback.solver")
     )
-    return Fallback(controller, ratio=ratio, report_tolerance=tol, solver=solver)
+    hard = spec.get("hard")
+    if hard is None:
+        hard_names = [
+            c.name
+            for c in controller.constraints
+            if c.type_name in DEFAULT_HARD or c.name in DEFAULT_HARD
+        ]
+    else:
+        if isinstance(hard, str) or not isinstance(hard, Sequence):
+            raise ConfigError(
+                f"hard must be a list of constraint names, got {hard!r}.", path="fallback.hard"
+            )
+        hard_names = []
+        known = [c.name for c in controller.constraints]
+        for i, h in enumerate(hard):
+            match = [c for c in controller.constraints if h in (c.name, c.type_name)]
+            if not match:
+                raise ConfigError(
+                    f"no constraint {h!r} in this controller.{close_matches_hint(str(h), known)} "
+                    f"Constraints: {', '.join(known)}.",
+                    path=f"fallback.hard[{i}]",
+                )
+            hard_names += [c.name for c in match]
+    return Fallback(
+        controller, ratio=ratio, report_tolerance=tol, solver=solver, hard=tuple(hard_names)
+    )
 
 
 class Fallback:
@@ -133,6 +160,8 @@ class Fallback:
         ratio: weight ratio between consecutive importance ranks (> 1).
         report_tolerance: slacks below this are not reported (row units).
         solver: solver of the phase-1 QP (own workspace; the shape is fixed).
+        hard: names of bound constraints the fallback never widens (default: velocity limits,
+            the actuators' physical limits); every other bound and row may give.
     """
 
     #: Quadratic regularization of the slacks and of the velocity in phase 1 (ProxSuite needs
@@ -144,12 +173,19 @@ class Fallback:
     WIDEN = 1e-4
 
     def __init__(
-        self, controller: Any, *, ratio: float, report_tolerance: float, solver: Any
+        self,
+        controller: Any,
+        *,
+        ratio: float,
+        report_tolerance: float,
+        solver: Any,
+        hard: tuple[str, ...] = (),
     ) -> None:
         self.controller = controller
         self.ratio = ratio
         self.report_tolerance = report_tolerance
         self.solver = solver
+        self.hard = hard
         nv, m = controller.robot.nv, controller.n_rows
         self.nv, self.m = nv, m
         levels = sorted({c.importance for c in controller.constraints})
@@ -190,6 +226,7 @@ class Fallback:
         p.g[sl["s-"]] = w_rows
         p.g[sl["s+"]] = w_rows
         p.lb[nv:] = 0.0
+        self._cap_lo, self._cap_hi = np.full(nv, np.inf), np.full(nv, np.inf)
 
     # ------------------------------------------------------------------ helpers
     def _box_owners(
@@ -198,10 +235,15 @@ class Fallback:
         """Weights of the box slacks and, per bound constraint, the entries it owns.
 
         The owner of a merged bound is the most important constraint whose own bound is at or
-        tighter than it (widening the merged bound violates that constraint first).
+        tighter than it (widening the merged bound violates that constraint first). Also sets the
+        caps of the box slacks: the relaxed box stays inside the bounds of the ``hard``
+        constraints.
         """
         nv = self.nv
         w_lo, w_hi = np.ones(nv), np.ones(nv)
+        cap_lo, cap_hi = self._cap_lo, self._cap_hi
+        cap_lo.fill(np.inf)
+        cap_hi.fill(np.inf)
         free_lo, free_hi = np.ones(nv, dtype=bool), np.ones(nv, dtype=bool)
         own_lo, own_hi = [], []
         lb, ub = tp.lb, tp.ub
@@ -214,6 +256,14 @@ class Fallback:
                 own_hi.append(np.zeros(nv, dtype=bool))
                 continue
             clo, chi = b
+            if con.name in self.hard:
+                with np.errstate(invalid="ignore"):  # inf - inf where both sides are unbounded
+                    room_lo = np.maximum(lb - clo, 0.0)
+                    room_hi = np.maximum(chi - ub, 0.0)
+                room_lo[~(np.isfinite(clo) & np.isfinite(lb))] = np.inf
+                room_hi[~(np.isfinite(chi) & np.isfinite(ub))] = np.inf
+                np.minimum(cap_lo, room_lo, out=cap_lo)
+                np.minimum(cap_hi, room_hi, out=cap_hi)
             mlo = free_lo & np.isfinite(clo) & (clo >= lb - tol_lo)
             mhi = free_hi & np.isfinite(chi) & (chi <= ub + tol_hi)
             w = self.weight_of[con.name]
@@ -249,6 +299,8 @@ class Fallback:
         p.l[m:], p.u[m:] = lb, ub
         p.g[sl["b-"]] = w_lo
         p.g[sl["b+"]] = w_hi
+        p.ub[sl["b-"]] = self._cap_lo
+        p.ub[sl["b+"]] = self._cap_hi
         try:
             sol = self.solver.solve(p)
         except Exception as exc:  # noqa: BLE001 - the loop must go on

@@ -32,6 +32,7 @@ switching contacts never changes the QP's shape.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -45,6 +46,29 @@ from ..validation import positive_float
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+_VELOCITY_KINEMATICS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def velocity_kinematics(state: RobotState) -> pin.Data:
+    r"""Forward kinematics of ``state`` at its velocity with zero joint acceleration (cached).
+
+    The second-order drift terms of ``contacts`` and ``support_polygon`` read the frames'
+    classical accelerations :math:`\dot J v` (and the CoM's) from it; one pass serves both, and
+    it is recomputed only when ``state.q`` or ``state.v`` changed. ``state.data`` is not touched.
+
+    Returns:
+        A pinocchio ``Data`` owned by the cache (do not keep it across ticks).
+    """
+    entry = _VELOCITY_KINEMATICS.get(state)
+    if entry is None:
+        entry = [state.model.createData(), None, None, np.zeros(state.model.nv)]
+        _VELOCITY_KINEMATICS[state] = entry
+    data, q, v, zero = entry
+    if q is None or not (np.array_equal(q, state.q) and np.array_equal(v, state.v)):
+        pin.forwardKinematics(state.model, data, state.q, state.v, zero)
+        entry[1], entry[2] = state.q.copy(), state.v.copy()
+    return data
 
 
 @CONSTRAINTS.register("contacts")
@@ -61,6 +85,7 @@ class Contacts(Constraint):
         gain: drift-correction gain :math:`K` [1/s]; ``None`` corrects the whole drift in one
             tick (:math:`K = 1/dt`). :math:`K\,dt` is capped at 1.
         second_order: anticipate the second-order drift of the tick (module docstring).
+        max_correction: caps of the drift-correction speed ``[linear m/s, angular rad/s]``.
         name: constraint name.
 
     Raises:
@@ -77,12 +102,25 @@ class Contacts(Constraint):
         active: Sequence[str] | None = None,
         gain: float | None = None,
         second_order: bool = True,
+        max_correction: Sequence[float] = (0.5, 2.0),
         name: str | None = None,
     ) -> None:
         super().__init__(name)
         if not isinstance(second_order, bool):
             raise ConfigError(f"second_order must be true or false, got {second_order!r}.")
         self.second_order = second_order
+        if (
+            isinstance(max_correction, str)
+            or not isinstance(max_correction, Sequence)
+            or len(max_correction) != 2
+        ):
+            raise ConfigError(
+                f"max_correction must be [linear m/s, angular rad/s], got {max_correction!r}."
+            )
+        self.max_correction = (
+            positive_float(max_correction[0], "max_correction[0] [m/s]"),
+            positive_float(max_correction[1], "max_correction[1] [rad/s]"),
+        )
         if feet is not None and (isinstance(feet, str) or not isinstance(feet, Sequence)):
             raise ConfigError(f"feet must be a list of foot names, got {feet!r}.")
         if frames is not None and not isinstance(frames, Mapping):
@@ -179,8 +217,6 @@ class Contacts(Constraint):
         self._b = np.zeros(self.n_rows)
         self._l = np.full(self.n_rows, -np.inf)
         self._u = np.full(self.n_rows, np.inf)
-        self._data2 = robot.model.createData()  # kinematics with the previous velocity
-        self._zero_a = np.zeros(robot.nv)
 
     def _check_names(self, feet: Sequence[str], path: str) -> np.ndarray:
         if isinstance(feet, str) or not isinstance(feet, Sequence):
@@ -232,6 +268,36 @@ class Contacts(Constraint):
         self._active[...] = new
         self.version += 1
 
+    def set_anchor(self, foot: str, pose: Any) -> None:
+        """Move the anchor of contact ``foot`` (e.g. to a planned footstep pose).
+
+        The drift correction then pulls the sole there at the rate of :attr:`gain` (a far anchor
+        is a contact set that cannot be kept this tick: the relaxation reports it). Listeners
+        (the support polygon) see the change through :attr:`version`.
+
+        Args:
+            foot: contact name.
+            pose: ``pinocchio.SE3`` or 4x4 homogeneous transform of the sole in the world.
+
+        Raises:
+            UnknownNameError: unknown contact. ConfigError: a malformed pose.
+        """
+        i = int(self._check_names([foot], "set_anchor").argmax())
+        if isinstance(pose, pin.SE3):
+            R, p = pose.rotation, pose.translation
+        else:
+            T = np.asarray(pose, dtype=float)
+            if T.shape != (4, 4) or not np.isfinite(T).all():
+                raise ConfigError(
+                    f"anchor pose must be a pinocchio.SE3 or a finite 4x4, got {T.shape}."
+                )
+            R, p = T[:3, :3], T[:3, 3]
+        if not np.allclose(R.T @ R, np.eye(3), atol=1e-6):
+            raise ConfigError("anchor rotation must be orthonormal.")
+        self._anchor_R[i] = R
+        self._anchor_p[i] = p
+        self.version += 1
+
     def anchor_pose(self, foot: str) -> pin.SE3:
         """World pose of the anchor of contact ``foot`` (meaningful while it is active)."""
         i = self._check_names([foot], "anchor_pose").argmax()
@@ -276,7 +342,7 @@ class Contacts(Constraint):
         drift = self.second_order and bool(self._active.any()) and bool(np.any(state.v))
         if drift:
             model = state.model
-            pin.forwardKinematics(model, self._data2, state.q, state.v, self._zero_a)
+            data2 = velocity_kinematics(state)
         for i, fid in enumerate(self.frame_ids):
             rows = slice(6 * i, 6 * i + 6)
             if not self._active[i]:
@@ -287,10 +353,17 @@ class Contacts(Constraint):
             M = state.frame_placement(fid)
             R = M.rotation
             C[rows] = state.frame_jacobian(fid)
-            b[6 * i : 6 * i + 3] = k * (self._anchor_p[i] - M.translation)
-            b[6 * i + 3 : 6 * i + 6] = k * (R @ pin.log3(R.T @ self._anchor_R[i]))
+            lin = k * (self._anchor_p[i] - M.translation)
+            ang = k * (R @ pin.log3(R.T @ self._anchor_R[i]))
+            n_lin, n_ang = np.linalg.norm(lin), np.linalg.norm(ang)
+            if n_lin > self.max_correction[0]:
+                lin *= self.max_correction[0] / n_lin
+            if n_ang > self.max_correction[1]:
+                ang *= self.max_correction[1] / n_ang
+            b[6 * i : 6 * i + 3] = lin
+            b[6 * i + 3 : 6 * i + 6] = ang
             if drift:
-                acc = pin.getFrameClassicalAcceleration(model, self._data2, fid, LWA)
+                acc = pin.getFrameClassicalAcceleration(model, data2, fid, LWA)
                 b[rows] -= (0.5 * dt) * acc.vector
             lo[rows] = b[rows]
             hi[rows] = b[rows]
@@ -299,5 +372,6 @@ class Contacts(Constraint):
     def __repr__(self) -> str:
         return (
             f"Contacts(contacts={self.names}, active={self.active_feet}, gain={self.gain}, "
-            f"second_order={self.second_order}, name={self.name!r})"
+            f"second_order={self.second_order}, max_correction={self.max_correction}, "
+            f"name={self.name!r})"
         )

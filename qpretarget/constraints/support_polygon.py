@@ -14,12 +14,18 @@ o_k`; this module uses the velocity-damper form of it,
 inside the polygon the CoM may close at most a fraction :math:`\gamma` of its distance to each
 edge per tick, so it approaches an edge smoothly and never crosses it to first order; outside, the
 right-hand side is negative and the row *demands* that the CoM move back by that fraction per
-tick, so the constraint recovers instead of being infeasible forever (when the demand is more than
-the other constraints allow this tick, the relaxation of ``qpretarget.relaxation`` lets this
-constraint give first and reports it). :math:`\gamma = 1` is DESIGN.md's plain linearization.
+tick of its distance to a line ``recovery_depth`` inside the edge (so that it re-enters in a finite
+number of ticks, about :math:`\ln(\delta / (d + \delta)) / \ln(1 - \gamma)` from a distance
+:math:`d` outside), so the constraint recovers instead of being infeasible forever (when the
+demand is more than the other constraints allow this tick, the relaxation of
+``qpretarget.relaxation`` lets this constraint give first and reports it). :math:`\gamma = 1` is
+DESIGN.md's plain linearization.
 
 The hull is recomputed only when the contacts change (``on_contacts_changed``, reset), never per
-tick. The block keeps ``max_edges`` rows (4 per contact); unused rows are inactive.
+tick. The block keeps ``max_edges`` rows (4 per contact); unused rows are inactive. With
+``second_order`` (default) the rows also subtract :math:`\tfrac{dt}{2} n_k^\top \ddot c_{xy}`, the
+CoM's drift acceleration at the previous velocity and zero joint acceleration, so that fast
+motions do not carry the CoM over an edge between two linearizations.
 """
 
 from __future__ import annotations
@@ -28,11 +34,13 @@ import warnings
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from ..errors import ConfigError
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
+from .contacts import velocity_kinematics
 
 
 def convex_hull_2d(points: np.ndarray) -> np.ndarray:
@@ -112,6 +120,10 @@ class SupportPolygon(Constraint):
             may close (or, outside, must recover) per tick.
         max_edges: number of rows (default 4 per contact of the ``contacts`` constraint, or per
             robot foot without one).
+        recovery_depth: when the CoM is outside an edge, it is steered towards a line this far
+            inside it [m], so it re-enters in finite time.
+        second_order: anticipate the CoM's second-order motion over the tick,
+            :math:`\tfrac12 \ddot c(q, v_{prev}, 0)\,dt^2` (as ``contacts`` does for the soles).
         name: constraint name.
 
     Without a ``contacts`` constraint in the controller, the polygon is made of all the robot's
@@ -126,9 +138,15 @@ class SupportPolygon(Constraint):
         margin: float = 0.01,
         gain: float = 0.2,
         max_edges: int | None = None,
+        recovery_depth: float = 0.002,
+        second_order: bool = True,
         name: str | None = None,
     ) -> None:
         super().__init__(name)
+        if not isinstance(second_order, bool):
+            raise ConfigError(f"second_order must be true or false, got {second_order!r}.")
+        self.second_order = second_order
+        self.recovery_depth = positive_float(recovery_depth, "recovery_depth [m]", allow_zero=True)
         self.margin = positive_float(margin, "margin [m]", allow_zero=True)
         self.gain = positive_float(gain, "gain")
         if self.gain > 1:
@@ -261,7 +279,15 @@ class SupportPolygon(Constraint):
         if k:
             Jxy = state.com_jacobian()[:2]  # (2, nv)
             np.matmul(self._N[:k], Jxy, out=self._C[:k])
-            self._u[:k] = (self.gain / dt) * (self._o[:k] - self._N[:k] @ state.com()[:2])
+            d = self._o[:k] - self._N[:k] @ state.com()[:2]  # (k,) distance inside each edge
+            # Outside an edge, aim `recovery_depth` inside it so that the CoM re-enters in finite
+            # time instead of approaching the edge asymptotically from outside.
+            d[d < 0.0] -= self.recovery_depth
+            self._u[:k] = (self.gain / dt) * d
+            if self.second_order and np.any(state.v):
+                data2 = velocity_kinematics(state)
+                pin.centerOfMass(state.model, data2, pin.KinematicLevel.ACCELERATION, False)
+                self._u[:k] -= (0.5 * dt) * (self._N[:k] @ data2.acom[0][:2])
         self._C[k:] = 0.0
         self._u[k:] = np.inf
         return ConstraintBlock(self.name, self._C, self._l, self._u)
@@ -269,5 +295,6 @@ class SupportPolygon(Constraint):
     def __repr__(self) -> str:
         return (
             f"SupportPolygon(margin={self.margin}, gain={self.gain}, max_edges={self.n_rows}, "
+            f"recovery_depth={self.recovery_depth}, second_order={self.second_order}, "
             f"name={self.name!r})"
         )
