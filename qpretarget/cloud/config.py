@@ -1,0 +1,382 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Configuration of point-cloud retargeting (``configs/cloud_*.yaml``, ``docs/point_clouds.md``).
+
+One YAML file with the robot, the QP solver and five sections; every key has a default (the
+paper's value where it gives one, Wang 2017 V.B-C) and is checked with the YAML path in errors::
+
+    name: g1_cloud
+    robot: g1
+    solver: {name: proxsuite, eps_abs: 1.0e-9}
+    input: {rate: 30, crop: {min: [-3, -3, 0.02], max: [3, 3, 2.5]}, voxel: 0.01, points: 2500}
+    template: {points: 5000, meshes: visual, skinning: rigid}
+    calibration: {enabled: true, scale_bounds: [0.5, 2.5]}
+    em: {outlier_weight: 0.1, sigma2_init: 4.0e-4, tolerance: 0.002, temporal_weight: 1000.0}
+    stability: {mode: qp, region: polygon, margin: 0.01}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..errors import ConfigError, close_matches_hint
+
+
+@dataclass
+class InputConfig:
+    """How clouds are read and reduced.
+
+    Attributes:
+        rate: frame rate [Hz] for inputs without times.
+        crop: ``{min: [x, y, z], max: [x, y, z]}`` world box [m] (None: keep all).
+        voxel: voxel edge [m] of the averaging grid (0: off).
+        points: cloud points per frame after subsampling (Wang 2017 V.B: 2,500).
+        normals_k: neighbours of the PCA normal estimate.
+        intrinsics: ``[fx, fy, cx, cy]`` for depth images without their own.
+        camera_pose: 4x4 camera-to-world transform for depth images.
+        depth_scale: metres per depth unit of integer depth images.
+        sensor_position: optical centre [x, y, z] in the world when the input does not say it.
+        seed: random seed of the subsampling.
+    """
+
+    rate: float | None = None
+    crop: dict[str, list[float]] | None = None
+    voxel: float = 0.01
+    points: int = 2500
+    normals_k: int = 10
+    intrinsics: Any = None
+    camera_pose: Any = None
+    depth_scale: float | None = None
+    sensor_position: list[float] | None = None
+    seed: int = 0
+
+
+@dataclass
+class TemplateConfig:
+    """The HUMROB template (Wang 2017 IV.A).
+
+    Attributes:
+        points: template points (Wang 2017 V.B: 5,000).
+        meshes: ``visual`` or ``collision`` link meshes.
+        skinning: ``rigid`` or ``lbs`` (Wang 2017 eq. 9).
+        blend_radius: LBS blend distance around each joint [m].
+        seed: sampling seed.
+        exclude_links: links left out of the template.
+        link_density_exponent: points per link proportional to its outer area to this power
+            (1: even density over the body; 0.5: the small distal links get more points).
+    """
+
+    points: int = 5000
+    meshes: str = "visual"
+    skinning: str = "rigid"
+    blend_radius: float = 0.04
+    seed: int = 0
+    exclude_links: list[str] = field(default_factory=list)
+    link_density_exponent: float = 0.5
+
+
+@dataclass
+class CalibrationConfig:
+    """Limb lengths and initial pose from the first frame.
+
+    Attributes:
+        enabled: estimate the segment scales from the first frame (else use ``scales``).
+        scales: fixed scales: one number for all segments or ``{segment: value}`` (1: the robot).
+        scale_bounds: ``[low, high]`` bounds of every scale.
+        scale_prior: weight pulling the scales towards their mean (0: none).
+        iterations: EM iterations of each calibration phase (one common scale, then one per
+            segment).
+        initial_yaw: heading of the first fit [rad], or ``auto`` (face the sensor).
+        initial_joints: joint values [rad] of the first fit's start (over the reference posture).
+        personalize: after the fit, replace the template points the sensor saw by the frame's
+            own points, attached to the joint of their nearest template point (Wang 2017 IV.A:
+            the personalised model with transferred skinning).
+        personalize_distance: observed points farther than this from the fitted template are
+            left out (outliers) [m].
+    """
+
+    enabled: bool = True
+    scales: Any = None
+    scale_bounds: list[float] = field(default_factory=lambda: [0.5, 2.5])
+    scale_prior: float = 1000.0
+    iterations: int = 60
+    initial_yaw: Any = "auto"
+    initial_joints: dict[str, float] = field(default_factory=dict)
+    personalize: bool = True
+    personalize_distance: float = 0.025
+
+
+@dataclass
+class EMConfig:
+    r"""EM fitting per frame (Wang 2017 eq. 1-5, 12-17, 20-21, Alg. 1).
+
+    Attributes:
+        outlier_weight: :math:`\mu`, the weight of the uniform outlier term (eq. 1).
+        sigma2_init: initial :math:`\sigma^2` of every frame [m^2] (V.C: 0.02^2).
+        sigma2_min: floor of :math:`\sigma^2` [m^2].
+        max_iterations: EM iterations of the linear stage per frame.
+        tolerance: convergence when every joint moves less than this [rad] (V.C: 0.002).
+        temporal_weight: :math:`\lambda_r` of eq. 16 (V.C: 1000) on the squared joint change from
+            the previous frame.
+        temporal_reference: ``previous`` (eq. 16: change from the previous frame) or
+            ``prediction`` (change from the auto-regressive prediction, which does not lag).
+        normal_weight: :math:`\lambda_\perp = \lambda_f` of eq. 15 and 21 (V.C: 0.5).
+        normal_scale: length [m] the unit normals are multiplied by so that positions and
+            normals share :math:`\sigma^2` (see :mod:`qpretarget.cloud.em`).
+        refine_iterations: iterations of the final refinement with normals (0: off).
+        estep: ``kdtree`` (truncated to ``neighbors`` nearest template points) or ``dense``.
+        neighbors: template points per cloud point in the truncated E-step.
+        neighbor_refresh: search the neighbours again once a template point has moved more than
+            this many sigma since the last search (the pairs are reused until then; 0: always).
+        max_backtracks: step halvings before a step is refused (0: accept every full step).
+        overrelaxation: largest over-relaxed step (a multiple of the M-step, grown by 1.25 while
+            it keeps lowering the EM bound; 1: off). EM is slow along weakly determined
+            directions; a longer step that still lowers the bound keeps the monotonicity.
+        cull_backfaces: leave out template points facing away from the sensor.
+        visibility_passes: linear-stage passes, each with the visible template points recomputed
+            at the previous pass's fit (the first pass uses the predicted pose).
+        occlusion_cell: also leave out template points hidden behind other parts, by a point
+            z-buffer of this cell size [m] (0: off).
+        prediction: ``ar3`` (third-order auto-regression, V.B) or ``constant``.
+        ar_window: frames used to fit the auto-regression.
+        damping: Levenberg-Marquardt damping relative to the mean diagonal of H.
+    """
+
+    outlier_weight: float = 0.1
+    sigma2_init: float = 4.0e-4
+    sigma2_min: float = 1.0e-6
+    max_iterations: int = 30
+    tolerance: float = 0.002
+    temporal_weight: float = 100.0
+    temporal_reference: str = "prediction"
+    normal_weight: float = 0.5
+    normal_scale: float = 0.05
+    refine_iterations: int = 3
+    estep: str = "kdtree"
+    neighbors: int = 8
+    neighbor_refresh: float = 0.5
+    max_backtracks: int = 10
+    overrelaxation: float = 1.8
+    cull_backfaces: bool = True
+    occlusion_cell: float = 0.02
+    visibility_passes: int = 1
+    prediction: str = "ar3"
+    ar_window: int = 10
+    damping: float = 1.0e-6
+
+
+@dataclass
+class StabilityConfig:
+    """Static balance (Wang 2017 eq. 18-19).
+
+    Attributes:
+        mode: ``qp`` (CoM rows in every M-step), ``hip_offset`` (the paper's rule after the fit)
+            or ``none``.
+        region: ``polygon`` (SP) or ``inscribed_circle`` (the paper's :math:`C_{SP}`).
+        margin: distance kept inside the region [m].
+        support_height: a sole within this height of the lowest sole supports [m].
+        release_height: a supporting sole stops supporting above this height [m].
+        flight_height: lowest sole above this height: no support (flight) [m].
+        hip_joints: joints of the paper's rule (default: ``*hip*pitch*``, ``*hip*roll*``).
+    """
+
+    mode: str = "qp"
+    region: str = "polygon"
+    margin: float = 0.01
+    support_height: float = 0.04
+    release_height: float = 0.07
+    flight_height: float = 0.25
+    hip_joints: list[str] | None = None
+
+
+TOP_KEYS = (
+    "name",
+    "description",
+    "robot",
+    "solver",
+    "input",
+    "template",
+    "calibration",
+    "em",
+    "stability",
+)
+
+_CHOICES = {
+    ("template", "meshes"): ("visual", "collision"),
+    ("template", "skinning"): ("rigid", "lbs"),
+    ("em", "estep"): ("kdtree", "dense"),
+    ("em", "prediction"): ("ar3", "constant"),
+    ("em", "temporal_reference"): ("previous", "prediction"),
+    ("stability", "mode"): ("qp", "hip_offset", "none"),
+    ("stability", "region"): ("polygon", "inscribed_circle"),
+}
+
+
+def _section(cls: type, spec: Any, path: str) -> Any:
+    if spec is None:
+        return cls()
+    if not isinstance(spec, Mapping):
+        raise ConfigError(f"expected a mapping, got {spec!r}.", path=path)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    default = cls()
+    values = {}
+    for key, value in spec.items():
+        if key not in fields:
+            raise ConfigError(
+                f"unknown key {key!r}.{close_matches_hint(str(key), list(fields))} "
+                f"Keys: {', '.join(fields)}.",
+                path=f"{path}.{key}",
+            )
+        ref = getattr(default, key)
+        choices = _CHOICES.get((path, key))
+        if choices is not None and value not in choices:
+            raise ConfigError(
+                f"must be one of {', '.join(choices)}, got {value!r}.", path=f"{path}.{key}"
+            )
+        if isinstance(ref, bool):
+            if not isinstance(value, bool):
+                raise ConfigError(f"must be true or false, got {value!r}.", path=f"{path}.{key}")
+        elif isinstance(ref, int):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ConfigError(f"must be an integer >= 0, got {value!r}.", path=f"{path}.{key}")
+        elif isinstance(ref, float):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+                raise ConfigError(f"must be a number >= 0, got {value!r}.", path=f"{path}.{key}")
+            value = float(value)
+        values[key] = value
+    return cls(**values)
+
+
+@dataclass
+class CloudConfig:
+    """The whole configuration of :class:`~qpretarget.cloud.em.CloudRetargeter`."""
+
+    name: str = "cloud"
+    description: str = ""
+    robot: Any = "g1"
+    solver: Any = field(default_factory=lambda: {"name": "proxsuite", "eps_abs": 1e-9})
+    input: InputConfig = field(default_factory=InputConfig)
+    template: TemplateConfig = field(default_factory=TemplateConfig)
+    calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
+    em: EMConfig = field(default_factory=EMConfig)
+    stability: StabilityConfig = field(default_factory=StabilityConfig)
+    text: str = ""
+
+    @classmethod
+    def from_dict(cls, spec: Mapping[str, Any] | None, *, text: str = "") -> CloudConfig:
+        """Validate a mapping (the YAML's content).
+
+        Raises:
+            ConfigError: with the YAML path of the first problem.
+        """
+        spec = dict(spec or {})
+        for key in spec:
+            if key not in TOP_KEYS:
+                raise ConfigError(
+                    f"unknown key {key!r}.{close_matches_hint(str(key), TOP_KEYS)} "
+                    f"Top-level keys: {', '.join(TOP_KEYS)}.",
+                    path=str(key),
+                )
+        cfg = cls(
+            name=str(spec.get("name", "cloud")),
+            description=str(spec.get("description", "")),
+            robot=spec.get("robot", "g1"),
+            solver=spec.get("solver", {"name": "proxsuite", "eps_abs": 1e-9}),
+            input=_section(InputConfig, spec.get("input"), "input"),
+            template=_section(TemplateConfig, spec.get("template"), "template"),
+            calibration=_section(CalibrationConfig, spec.get("calibration"), "calibration"),
+            em=_section(EMConfig, spec.get("em"), "em"),
+            stability=_section(StabilityConfig, spec.get("stability"), "stability"),
+            text=text,
+        )
+        cfg._check()
+        return cfg
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> CloudConfig:
+        """Read and validate a YAML file.
+
+        Raises:
+            ConfigError: missing file, YAML syntax error (with line) or invalid content.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"config file {str(path)!r} does not exist.")
+        text = path.read_text(encoding="utf-8")
+        try:
+            spec = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+            raise ConfigError(
+                f"{path}: invalid YAML{where}: {getattr(exc, 'problem', exc)}"
+            ) from None
+        if spec is not None and not isinstance(spec, Mapping):
+            raise ConfigError(f"{path}: the file must hold a mapping (robot:, em:, ...).")
+        try:
+            return cls.from_dict(spec, text=text)
+        except ConfigError as exc:
+            raise ConfigError(f"{path.name}: {exc}") from None
+
+    def to_yaml(self) -> str:
+        """The configuration as YAML (the file's own text when read from a file)."""
+        if self.text:
+            return self.text
+        d = {k: v for k, v in dataclasses.asdict(self).items() if k != "text"}
+        return yaml.safe_dump(d, sort_keys=False)
+
+    def _check(self) -> None:
+        em, st, cal, inp, tp = self.em, self.stability, self.calibration, self.input, self.template
+        if not 0 <= em.outlier_weight < 1:
+            raise ConfigError(
+                f"must be in [0, 1), got {em.outlier_weight}.", path="em.outlier_weight"
+            )
+        if em.sigma2_init <= 0 or em.sigma2_min <= 0 or em.sigma2_min > em.sigma2_init:
+            raise ConfigError("need 0 < sigma2_min <= sigma2_init [m^2].", path="em.sigma2_init")
+        if em.tolerance <= 0:
+            raise ConfigError("must be > 0 [rad].", path="em.tolerance")
+        if em.neighbors < 1:
+            raise ConfigError("must be >= 1.", path="em.neighbors")
+        if tp.points < 50:
+            raise ConfigError(f"must be >= 50, got {tp.points}.", path="template.points")
+        if inp.points < 10:
+            raise ConfigError(f"must be >= 10, got {inp.points}.", path="input.points")
+        b = cal.scale_bounds
+        if not (isinstance(b, list) and len(b) == 2 and 0 < float(b[0]) < float(b[1])):
+            raise ConfigError(
+                f"must be [low, high] with 0 < low < high, got {b!r}.",
+                path="calibration.scale_bounds",
+            )
+        if cal.initial_yaw != "auto" and not isinstance(cal.initial_yaw, (int, float)):
+            raise ConfigError(
+                f"must be `auto` or an angle [rad], got {cal.initial_yaw!r}.",
+                path="calibration.initial_yaw",
+            )
+        if inp.crop is not None:
+            c = inp.crop
+            try:
+                lo, hi = [float(x) for x in c["min"]], [float(x) for x in c["max"]]
+                if len(lo) != 3 or len(hi) != 3 or any(a >= b for a, b in zip(lo, hi, strict=True)):
+                    raise ValueError
+            except (KeyError, TypeError, ValueError):
+                raise ConfigError(
+                    f"must be {{min: [x, y, z], max: [x, y, z]}} with min < max [m], got {c!r}.",
+                    path="input.crop",
+                ) from None
+        if st.margin < 0:
+            raise ConfigError("must be >= 0 [m].", path="stability.margin")
+
+
+__all__ = [
+    "CalibrationConfig",
+    "CloudConfig",
+    "EMConfig",
+    "InputConfig",
+    "StabilityConfig",
+    "TemplateConfig",
+]

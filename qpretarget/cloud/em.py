@@ -1,0 +1,1083 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Generative retargeting from point clouds: EM fit of the HUMROB template, one QP per M-step.
+
+Wang 2017 (HUMROB) fits a robot-shaped template to each depth frame with a Gaussian mixture whose
+centroids are the template points :math:`v_m(\Theta)` (M of them) and whose data are the cloud
+points :math:`s_n` (N of them), plus a uniform outlier term of weight :math:`\mu` (eq. 1-2). The
+negative log-likelihood (eq. 3) is
+
+.. math::
+    E(\Theta, \sigma^2) = -\sum_n \log\Big(\frac{1-\mu}{M} \sum_m
+        \mathcal N(s_n; v_m(\Theta), \sigma^2 I) + \frac{\mu}{N}\Big).
+
+**E-step** (eq. 4, 20): posteriors
+:math:`p_{mn} = e^{-\|s_n - v_m\|^2 / 2\sigma^2} / (\sum_i e^{-\|s_n - v_i\|^2/2\sigma^2} + c)`
+with :math:`c = (2\pi\sigma^2)^{3/2} \frac{\mu}{1-\mu} \frac{M}{N}`. (Eq. 4 as printed has
+:math:`(1-\mu)/\mu`; the value consistent with eq. 1 and 3, and with Myronenko and Song's CPD that
+the paper follows, is :math:`\mu/(1-\mu)`, used here.) ``estep: kdtree`` keeps, for each cloud
+point, its ``neighbors`` nearest template points (scipy ``cKDTree``) and drops the other terms of
+the sum, which are below :math:`e^{-d^2/2\sigma^2}` for a distance d beyond the k-th neighbour;
+the truncated likelihood is the one reported and made monotone (see below).
+
+**M-step** (eq. 5, 13-14 linearized, 16-17): with :math:`P_m = \sum_n p_{mn}`, the template's
+linearization :math:`v_m + J_m \Delta` and the temporal term
+:math:`\lambda_r E_r = \lambda_r \|\theta + \Delta - \theta_{t-1}\|^2` (eq. 16, squared so that the
+step is a QP), the step solves
+
+.. math::
+    \min_\Delta\ \tfrac12 \Delta^\top H \Delta - b^\top \Delta + \sigma^2 \lambda_r
+    \|\theta + \Delta - \theta_{t-1}\|^2
+    \quad\text{s.t.}\quad \theta_{min} \le \theta + \Delta \le \theta_{max},\
+    n_k^\top (c_{F,xy} + J_{F,xy}\Delta) \le o_k
+
+(:meth:`Template.normal_equations` for H, b; joint limits are hard bounds, eq. 17; the CoM rows
+are :mod:`.stability`), with ProxSuite. Then :math:`\sigma^2 = \sum p_{mn}\|s_n - v_m\|^2 / 3N_P`.
+
+**Monotonicity.** A linearized step can increase the objective. The step
+:math:`\alpha\Delta` is accepted only when the complete-data objective with the E-step's
+posteriors, :math:`Q(\Theta) + \lambda_r E_r(\Theta)` (eq. 5 plus the prior), does not exceed its
+value at the current :math:`\Theta`; otherwise :math:`\alpha` is halved (``max_backtracks`` times,
+after which the frame stops). Since the posteriors make Q an upper bound of the NLL that touches it
+at the current point (EM), and the :math:`\sigma^2` update minimises Q, every accepted iteration
+lowers :math:`E + \lambda_r E_r` -- eq. 3 itself when :math:`\lambda_r = 0`. With the kd-tree
+E-step the k nearest neighbours give the largest truncated sum, so the argument holds for the
+truncated NLL.
+
+**Refinement** (eq. 15, 21): a few more iterations of EM on position and normal together, i.e. a
+mixture in 6-D with
+:math:`\mathcal N(s; v, \sigma^2)\,\mathcal N(\ell s^\perp; \ell v^\perp, \sigma^2/\lambda_\perp)`,
+whose posteriors are eq. 21 and whose M-step adds :math:`\lambda_\perp E_\perp` (eq. 15) with the
+normal's linearization :math:`v^\perp + \omega \times v^\perp`; same acceptance rule, on its own
+NLL; :math:`\sigma^2 = \sum p_{mn}(\|s_n - v_m\|^2
++ \lambda_\perp \ell^2 \|s^\perp_n - v^\perp_m\|^2)/6N_P`.
+The paper shares one :math:`\sigma^2` between positions [m] and unit normals without saying in
+which units; read literally (:math:`\ell` = 1 m) a 20 deg normal error would weigh like a 25 cm
+position error at :math:`\lambda_\perp = 0.5`. Here the normals are scaled by the length
+``normal_scale`` :math:`\ell` (default 5 cm, which makes both terms of the same order for a
+1 cm fit and normals estimated within about 20 deg).
+
+**Initialization** (V.B): a third-order auto-regression of the previous poses (an AR(2) on the
+frame-to-frame steps, i.e. an AR(3) on poses whose coefficients sum to one), its two coefficients
+fitted by ridge least squares over the last ``ar_window`` frames pooled over the joints.
+**Convergence** (V.C): every joint moves less than ``tolerance`` (0.002 rad) in an iteration.
+
+**Limb lengths**: the first frame is fitted with the segment scales of :class:`Template` as extra
+variables (points are linear in them at fixed pose), from a standing posture facing the sensor.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from ..errors import ConfigError
+from ..problem import QPProblem
+from ..robot import RobotModel, load_robot
+from ..solvers import make_solver
+from ..trajectory import RobotTrajectory
+from .config import CloudConfig
+from .io import CloudFrame, CloudSequence, estimate_normals, prepare_cloud
+from .stability import (
+    HipRuleState,
+    StabilityRows,
+    Support,
+    SupportTracker,
+    hip_joint_indices,
+    hip_offset_rule,
+)
+from .template import PosedTemplate, Template
+
+LOG_2PI = math.log(2.0 * math.pi)
+#: The calibration uses the dense E-step while sigma is above this [m] (coarse alignment).
+CALIBRATION_DENSE_SIGMA = 0.03
+#: Largest initial sigma of the calibration [m] (the start pose is already roughly aligned).
+CALIBRATION_SIGMA0 = 0.05
+
+
+# ------------------------------------------------------------------------------ E-step
+@dataclass
+class EStep:
+    r"""Result of an E-step: the NLL at the current parameters and the posterior statistics.
+
+    Attributes:
+        nll: negative log-likelihood (eq. 3; eq. 21's 6-D mixture when normals are used).
+        P1: (M,) :math:`\sum_n p_{mn}` per template point (0 for inactive points).
+        Px: (M, 3) :math:`\sum_n p_{mn} s_n`.
+        Pn: (M, 3) :math:`\sum_n p_{mn} s^\perp_n` (normal stage) or None.
+        wS2: :math:`\sum_{n,m} p_{mn} \|s_n\|^2`; wN2: the same for normals.
+        Np: :math:`N_P = \sum_{n,m} p_{mn}`.
+        dim: 3 (positions) or 6 (positions and normals).
+        normal_weight: :math:`\lambda_\perp` of the normal stage (0 otherwise).
+    """
+
+    nll: float
+    P1: np.ndarray
+    Px: np.ndarray
+    Pn: np.ndarray | None
+    wS2: float
+    wN2: float
+    Np: float
+    dim: int
+    normal_weight: float
+    normal_scale: float = 1.0
+    pairs: np.ndarray | None = None
+
+    def bracket(self, posed: PosedTemplate) -> float:
+        r"""Weighted squared residuals at the template ``posed`` (sufficient statistics).
+
+        :math:`\sum_{n,m} p_{mn} (\|s_n - v_m\|^2 + \lambda_\perp \|s^\perp_n - v^\perp_m\|^2)`.
+        """
+        v = posed.points
+        out = (
+            self.wS2
+            - 2.0 * np.einsum("ma,ma->", v, self.Px)
+            + np.einsum("m,ma,ma->", self.P1, v, v)
+        )
+        if self.Pn is not None:
+            n = self.normal_scale * posed.normals
+            out += self.normal_weight * (
+                self.wN2
+                - 2.0 * np.einsum("ma,ma->", n, self.Pn)
+                + np.einsum("m,ma,ma->", self.P1, n, n)
+            )
+        return float(out)
+
+    def q_value(self, posed: PosedTemplate, sigma2: float) -> float:
+        """Complete-data objective (eq. 5 / 13 + 15) with these posteriors, up to a constant."""
+        return self.bracket(posed) / (2.0 * sigma2) + 0.5 * self.dim * self.Np * math.log(sigma2)
+
+    def sigma2_update(self, posed: PosedTemplate) -> float:
+        r"""Minimiser of :meth:`q_value` over :math:`\sigma^2` at ``posed``."""
+        return self.bracket(posed) / (self.dim * max(self.Np, 1e-300))
+
+
+def e_step(
+    S: np.ndarray,
+    V: np.ndarray,
+    active: np.ndarray,
+    sigma2: float,
+    mu: float,
+    *,
+    mode: str = "kdtree",
+    neighbors: int = 12,
+    Sn: np.ndarray | None = None,
+    Vn: np.ndarray | None = None,
+    normal_weight: float = 0.0,
+    normal_scale: float = 1.0,
+    pairs: np.ndarray | None = None,
+    chunk: int = 512,
+) -> EStep:
+    r"""E-step of Wang 2017 eq. 4/20 (or eq. 21 with normals) and the NLL of eq. 3.
+
+    Args:
+        S: (N, 3) cloud points.
+        V: (M, 3) posed template points.
+        active: (M,) booleans, template points taking part (the others get no mass).
+        sigma2: variance [m^2].
+        mu: outlier weight in [0, 1).
+        mode: ``dense`` (all pairs) or ``kdtree`` (``neighbors`` nearest template points).
+        neighbors: template points per cloud point in ``kdtree`` mode.
+        Sn: (N, 3) unit normals of the cloud for the 6-D normal stage.
+        Vn: (M, 3) unit normals of the template for the 6-D normal stage.
+        normal_weight: :math:`\lambda_\perp` (> 0 with normals).
+        normal_scale: length :math:`\ell` [m] the unit normals are multiplied by.
+        pairs: (N, k) template indices to use instead of a new neighbour search (``kdtree``
+            mode); the result's ``pairs`` are the ones used. Any fixed set gives an upper bound
+            of the truncated NLL, so reusing pairs between searches keeps EM monotone.
+        chunk: cloud points per block of the dense E-step.
+    """
+    idx_act = np.flatnonzero(active)
+    M = len(idx_act)
+    N = len(S)
+    Mtot = len(V)
+    use_n = Sn is not None and Vn is not None and normal_weight > 0
+    if M == 0 or N == 0:
+        raise ValueError("empty template or cloud")
+    if use_n:
+        Sn, Vn = normal_scale * Sn, normal_scale * Vn  # type: ignore[operator]
+    Afull = V
+    if use_n:
+        sq = math.sqrt(normal_weight)
+        Afull = np.hstack([V, sq * Vn])
+        B = np.hstack([S, sq * Sn])
+        dim = 6
+        lognorm = -3.0 * (LOG_2PI + math.log(sigma2)) + 1.5 * math.log(normal_weight)
+    else:
+        B = S
+        dim = 3
+        lognorm = -1.5 * (LOG_2PI + math.log(sigma2))
+    A = Afull[idx_act]
+    log_in = math.log1p(-mu) - math.log(M) + lognorm
+    log_out = math.log(mu / N) if mu > 0 else -np.inf
+    P1 = np.zeros(Mtot)
+    Px = np.zeros((Mtot, 3))
+    Pn = np.zeros((Mtot, 3)) if use_n else None
+    nll = 0.0
+    wS2 = wN2 = Np = 0.0
+    s2 = np.einsum("na,na->n", S, S)
+    n2 = np.einsum("na,na->n", Sn, Sn) if use_n else None
+    if mode == "dense":
+        a2 = np.einsum("ma,ma->m", A, A)
+        for lo in range(0, N, chunk):
+            Bc = B[lo : lo + chunk]
+            D = np.einsum("na,na->n", Bc, Bc)[:, None] + a2[None, :] - 2.0 * Bc @ A.T
+            np.maximum(D, 0.0, out=D)
+            a = D * (-0.5 / sigma2)
+            amax = a.max(axis=1)
+            lse = amax + np.log(np.exp(a - amax[:, None]).sum(axis=1))
+            logp = np.logaddexp(log_in + lse, log_out)
+            nll -= float(logp.sum())
+            post = np.exp(log_in + a - logp[:, None])
+            w = post.sum(axis=1)
+            P1[idx_act] += post.sum(axis=0)
+            Px[idx_act] += post.T @ S[lo : lo + chunk]
+            wS2 += float(w @ s2[lo : lo + chunk])
+            if use_n:
+                Pn[idx_act] += post.T @ Sn[lo : lo + chunk]  # type: ignore[index]
+                wN2 += float(w @ n2[lo : lo + chunk])  # type: ignore[index]
+            Np += float(w.sum())
+    elif mode == "kdtree":
+        from scipy.spatial import cKDTree
+
+        if pairs is None:
+            k = int(min(neighbors, M))
+            dist, nb = cKDTree(A).query(B, k=k)
+            if k == 1:
+                dist, nb = dist[:, None], nb[:, None]
+            pairs = idx_act[nb]
+            d2 = dist * dist
+        else:
+            k = pairs.shape[1]
+            diff = B[:, None, :] - Afull[pairs]
+            d2 = np.einsum("nka,nka->nk", diff, diff)
+        a = d2 * (-0.5 / sigma2)
+        amax = a.max(axis=1)
+        lse = amax + np.log(np.exp(a - amax[:, None]).sum(axis=1))
+        logp = np.logaddexp(log_in + lse, log_out)
+        nll = -float(logp.sum())
+        post = np.exp(log_in + a - logp[:, None])
+        w = post.sum(axis=1)
+        m = pairs.reshape(-1)
+        pf = post.reshape(-1)
+        P1 = np.bincount(m, pf, Mtot)
+        rep = np.repeat(np.arange(N), k)
+        Px = np.stack([np.bincount(m, pf * S[rep, c], Mtot) for c in range(3)], axis=1)
+        wS2 = float(w @ s2)
+        if use_n:
+            Pn = np.stack([np.bincount(m, pf * Sn[rep, c], Mtot) for c in range(3)], axis=1)  # type: ignore[index]
+            wN2 = float(w @ n2)  # type: ignore[operator]
+        Np = float(w.sum())
+    else:
+        raise ConfigError(f"estep must be 'kdtree' or 'dense', got {mode!r}.", path="em.estep")
+    return EStep(
+        nll, P1, Px, Pn, wS2, wN2, Np, dim, normal_weight if use_n else 0.0, normal_scale, pairs
+    )
+
+
+def visible_from(
+    points: np.ndarray, eye: np.ndarray, cell: float, depth_tolerance: float | None = None
+) -> np.ndarray:
+    """Points not hidden behind others as seen from ``eye``: a point z-buffer on angular cells.
+
+    Directions are binned in cells of ``cell`` metres at the points' median distance; in each
+    cell, points deeper than the nearest one by more than ``depth_tolerance`` (default
+    ``2 cell``) are hidden.
+    """
+    d = points - eye
+    r = np.linalg.norm(d, axis=1)
+    r_med = float(np.median(r))
+    ang = cell / max(r_med, 1e-6)
+    az = np.arctan2(d[:, 1], d[:, 0])
+    el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
+    cu = np.floor(az * np.cos(np.median(el)) / ang).astype(np.int64)
+    cv = np.floor(el / ang).astype(np.int64)
+    key = (cu - cu.min()) * (cv.max() - cv.min() + 1) + (cv - cv.min())
+    _, inv = np.unique(key, return_inverse=True)
+    front = np.full(int(inv.max()) + 1, np.inf)
+    np.minimum.at(front, inv, r)
+    tol = 2.0 * cell if depth_tolerance is None else depth_tolerance
+    return r <= front[inv] + tol
+
+
+# ------------------------------------------------------------------------------ results
+@dataclass
+class IterationLog:
+    """One EM iteration: NLL before it, the step length accepted, halvings, sigma^2 after."""
+
+    stage: str
+    nll: float
+    objective: float
+    alpha: float
+    backtracks: int
+    sigma2: float
+    max_joint_step: float
+    q_full_step_increase: bool = False
+
+
+@dataclass
+class FrameResult:
+    """Outcome of one frame.
+
+    Attributes:
+        q_fit: fitted HUMROB configuration (nq,): the person's pose in the world, robot joints.
+        q_robot: robot configuration (nq,): same joints, primary sole flat on the floor.
+        sigma2: final variance [m^2]. nll: final NLL of the linear stage (eq. 3).
+        iterations: EM iterations (both stages). support: supporting feet.
+        com_margin: signed distance of the robot's CoM projection inside the unshrunk support
+            polygon [m] (NaN in flight).
+        status: ``ok``, ``relaxed`` (balance could not be restored) or ``held`` (fit failed).
+        log: per-iteration log. time: wall time [s]. rule: what the hip-offset rule did.
+    """
+
+    q_fit: np.ndarray
+    q_robot: np.ndarray
+    sigma2: float
+    nll: float
+    iterations: int
+    support: Support
+    com_margin: float
+    status: str
+    log: list[IterationLog] = field(default_factory=list)
+    time: float = 0.0
+    rule: str = ""
+
+
+# ------------------------------------------------------------------------------ the fitter
+class CloudRetargeter:
+    """Fit the HUMROB template to a sequence of clouds; the joint angles drive the robot.
+
+    Args:
+        config: a :class:`CloudConfig` (or its mapping).
+        robot: an already built robot (default: ``config.robot``).
+        template: an already built template (default: built from ``config.template``).
+
+    Use :meth:`run` on a :class:`~.io.CloudSequence`, or :meth:`fit` frame by frame (the first
+    call calibrates the limb lengths unless ``calibration.enabled`` is false).
+    """
+
+    def __init__(
+        self,
+        config: CloudConfig | dict[str, Any] | None = None,
+        *,
+        robot: RobotModel | None = None,
+        template: Template | None = None,
+    ) -> None:
+        cfg = config if isinstance(config, CloudConfig) else CloudConfig.from_dict(config)
+        self.config = cfg
+        self.robot = robot if robot is not None else load_robot(cfg.robot, path="robot")
+        tc = cfg.template
+        self.template = (
+            template
+            if template is not None
+            else Template(
+                self.robot,
+                n_points=tc.points,
+                meshes=tc.meshes,
+                skinning=tc.skinning,
+                blend_radius=tc.blend_radius,
+                seed=tc.seed,
+                exclude_links=tc.exclude_links,
+                link_density_exponent=tc.link_density_exponent,
+            )
+        )
+        self.model = self.template.model
+        make_solver(cfg.solver, path="solver")  # validate now
+        self._solver = make_solver(cfg.solver, path="solver")
+        self._solver_restore = make_solver(cfg.solver, path="solver")
+        st = cfg.stability
+        self.stability_mode = st.mode
+        nv = self.robot.nv
+        self._n_rows = 0
+        if st.mode != "none":
+            self.tracker = SupportTracker(
+                self.robot,
+                support_height=st.support_height,
+                release_height=st.release_height,
+                flight_height=st.flight_height,
+            )
+            self.rows = StabilityRows(self.robot, margin=st.margin, region=st.region)
+            self._n_rows = self.rows.n_rows if st.mode == "qp" else 0
+            if st.mode == "hip_offset":
+                self._hips = hip_joint_indices(self.robot, st.hip_joints)
+        self._qp = QPProblem(nv, self._n_rows)
+        qi = self.robot.joint_q_index
+        vi = self.robot.joint_v_index
+        self._qi, self._vi = qi, vi
+        lo, hi = self.robot.q_min[qi], self.robot.q_max[qi]
+        self._bounded = np.isfinite(lo) & np.isfinite(hi)
+        self._sole_ids = {f: self.model.getFrameId(d.frame) for f, d in self.robot.feet.items()}
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget the history (the next :meth:`fit` calibrates again if enabled)."""
+        self.history: list[np.ndarray] = []
+        self.sensor_position: np.ndarray | None = None
+        self.calibrated = not self.config.calibration.enabled
+        if self.calibrated:
+            self.template.set_scales(self._fixed_scales())
+        self._hip_memory = HipRuleState()
+        self._planted: tuple[str, pin.SE3] | None = None
+        if self.stability_mode != "none":
+            self.tracker.reset()
+        self._solver.reset()
+
+    def _fixed_scales(self) -> np.ndarray:
+        spec = self.config.calibration.scales
+        names = self.template.segment_names
+        s = np.ones(len(names))
+        if spec is None:
+            return s
+        if isinstance(spec, (int, float)) and not isinstance(spec, bool):
+            return s * float(spec)
+        if isinstance(spec, dict):
+            for k, v in spec.items():
+                if k not in names:
+                    raise ConfigError(
+                        f"unknown segment {k!r}; segments: {', '.join(names)}.",
+                        path=f"calibration.scales.{k}",
+                    )
+                s[names.index(k)] = float(v)
+            return s
+        raise ConfigError(
+            f"must be a number or {{segment: scale}}, got {spec!r}.", path="calibration.scales"
+        )
+
+    # ------------------------------------------------------------------ helpers
+    def _prepare(
+        self, frame: CloudFrame | np.ndarray, rng_seed: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        inp = self.config.input
+        pts = frame.points if isinstance(frame, CloudFrame) else np.asarray(frame, float)
+        nrm = frame.normals if isinstance(frame, CloudFrame) else None
+        box = inp.crop
+        S, Sn = prepare_cloud(
+            pts,
+            nrm,
+            box_min=box["min"] if box else None,
+            box_max=box["max"] if box else None,
+            voxel=inp.voxel,
+            max_points=inp.points,
+            rng=np.random.default_rng(inp.seed + rng_seed),
+        )
+        if len(S) < 10:
+            raise ConfigError(
+                f"only {len(S)} cloud points left after cropping; check input.crop and the "
+                "world frame (z up, floor at z = 0).",
+                path="input.crop",
+            )
+        if Sn is None and self.config.em.refine_iterations > 0:
+            Sn = estimate_normals(S, self.sensor_position, inp.normals_k)
+        return S, Sn
+
+    def _active(self, posed: PosedTemplate) -> np.ndarray:
+        """Template points the sensor can see: facing it, and not behind another part."""
+        em = self.config.em
+        if not em.cull_backfaces or self.sensor_position is None:
+            return np.ones(self.template.n_points, bool)
+        view = posed.points - self.sensor_position
+        active = np.einsum("ma,ma->m", posed.normals, view) < 0.0
+        if em.occlusion_cell > 0:
+            active &= visible_from(posed.points, self.sensor_position, em.occlusion_cell)
+        return active
+
+    def _prior(self, q: np.ndarray, q_prev: np.ndarray | None) -> float:
+        if q_prev is None or self.config.em.temporal_weight == 0:
+            return 0.0
+        d = q[self._qi] - q_prev[self._qi]
+        return float(self.config.em.temporal_weight * d @ d)
+
+    def sole_heights(self, q: np.ndarray) -> dict[str, float]:
+        """World height of each sole of the fitted (HUMROB) model."""
+        pin.framesForwardKinematics(self.model, self.template.data, q)
+        return {
+            f: float(self.template.data.oMf[i].translation[2]) for f, i in self._sole_ids.items()
+        }
+
+    # ------------------------------------------------------------------ the QP step
+    def _solve_step(
+        self,
+        H: np.ndarray,
+        b: np.ndarray,
+        q: np.ndarray,
+        q_prev: np.ndarray | None,
+        sigma2: float,
+        with_rows: bool,
+    ) -> np.ndarray | None:
+        em = self.config.em
+        qp = self._qp
+        nv = self.robot.nv
+        qp.H[...] = H
+        qp.g[...] = -b
+        if q_prev is not None and em.temporal_weight > 0:
+            w = 2.0 * sigma2 * em.temporal_weight
+            d = q[self._qi] - q_prev[self._qi]
+            qp.H[self._vi, self._vi] += w
+            qp.g[self._vi] += w * d
+        damp = em.damping * max(float(np.trace(H)) / nv, 1e-12)
+        qp.H[np.diag_indices(nv)] += damp
+        qp.lb[...] = -np.inf
+        qp.ub[...] = np.inf
+        vi = self._vi[self._bounded]
+        qi = self._qi[self._bounded]
+        qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
+        qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+        if self._n_rows:
+            if with_rows and self.rows.support.feet:
+                C, lo, up = self.rows.rows(q)
+                qp.C[...] = C
+                qp.l[...] = lo
+                qp.u[...] = up
+            else:
+                qp.C[...] = 0.0
+                qp.l[...] = -np.inf
+                qp.u[...] = np.inf
+        sol = self._solver.solve(qp)
+        if sol.x is None or not np.all(np.isfinite(sol.x)):
+            return None
+        x = sol.x
+        x[vi] = np.clip(x[vi], qp.lb[vi], qp.ub[vi])
+        return x
+
+    def _stable(self, q: np.ndarray) -> bool:
+        if self._n_rows == 0 or not self.rows.support.feet:
+            return True
+        return self.rows.margin_of(q) >= -0.5 * self.rows.margin - 1e-9
+
+    def _restore_balance(self, q: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Smallest joint change putting the robot's CoM back in the shrunk region (a few QPs)."""
+        if self._n_rows == 0 or not self.rows.support.feet or self.rows.margin_of(q) >= 0:
+            return q, True
+        nv = self.robot.nv
+        qp = QPProblem(nv, self._n_rows)
+        for _ in range(8):
+            qp.H[...] = np.eye(nv)
+            qp.H[:6, :6] *= 1e3  # balance by the joints, not by moving the (free) base
+            qp.g[...] = 0.0
+            vi, qi = self._vi[self._bounded], self._qi[self._bounded]
+            qp.lb[...], qp.ub[...] = -np.inf, np.inf
+            qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
+            qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+            C, lo, up = self.rows.rows(q)
+            qp.C[...], qp.l[...], qp.u[...] = C, lo, up
+            sol = self._solver_restore.solve(qp)
+            if sol.x is None:
+                return q, False
+            q = pin.integrate(self.model, q, sol.x)
+            if self.rows.margin_of(q) >= -1e-6:
+                return q, True
+        return q, self.rows.margin_of(q) >= -0.5 * self.rows.margin
+
+    # ------------------------------------------------------------------ EM loop
+    def _em_stage(
+        self,
+        stage: str,
+        S: np.ndarray,
+        Sn: np.ndarray | None,
+        q: np.ndarray,
+        sigma2: float,
+        q_prev: np.ndarray | None,
+        active: np.ndarray,
+        iterations: int,
+        log: list[IterationLog],
+    ) -> tuple[np.ndarray, float, float]:
+        em = self.config.em
+        T = self.template
+        lam = em.normal_weight if stage == "refine" else 0.0
+        ell = em.normal_scale
+        use_rows = self.stability_mode == "qp"
+        nll = np.nan
+        pairs, ref = None, None
+        eta = 1.0
+        for _ in range(iterations):
+            posed = T.pose(q)
+            if pairs is not None and ref is not None:
+                moved = float(np.max(np.abs(posed.points[active] - ref)))
+                if moved > em.neighbor_refresh * math.sqrt(sigma2):
+                    pairs = None
+            est = e_step(
+                S,
+                posed.points,
+                active,
+                sigma2,
+                em.outlier_weight,
+                mode=em.estep,
+                neighbors=em.neighbors,
+                Sn=Sn if lam > 0 else None,
+                Vn=posed.normals if lam > 0 else None,
+                normal_weight=lam,
+                normal_scale=ell,
+                pairs=pairs,
+            )
+            if pairs is None:
+                ref = posed.points[active]
+            pairs = est.pairs
+            nll = est.nll
+            J6 = T.joint_jacobians()
+            E = est.Px - est.P1[:, None] * posed.points
+            En = None if est.Pn is None else est.Pn / ell - est.P1[:, None] * posed.normals
+            H, b = T.normal_equations(
+                posed, J6, est.P1, E, normal_weight=lam * ell * ell, P1n=est.P1, En=En
+            )
+            prior0 = self._prior(q, q_prev)
+            obj0 = est.q_value(posed, sigma2) + prior0
+            step = self._solve_step(H, b, q, q_prev, sigma2, use_rows)
+            if step is None:
+                log.append(IterationLog(stage, nll, nll + prior0, 0.0, 0, sigma2, 0.0))
+                break
+            accepted, halvings, increase = False, 0, False
+            # Over-relaxation first (alpha = eta > 1, kept only if Q still decreases), then the
+            # plain step, then halvings.
+            alphas = ([eta] if eta > 1.0 and em.max_backtracks > 0 else []) + [1.0]
+            alpha = alphas[0]
+            while True:
+                q_try = self._clip(pin.integrate(self.model, q, alpha * step))
+                posed_try = T.pose(q_try, jacobians=False)
+                obj = est.q_value(posed_try, sigma2) + self._prior(q_try, q_prev)
+                ok = obj <= obj0
+                if alpha == 1.0 and halvings == 0 and not ok:
+                    increase = True
+                if (ok and self._stable(q_try)) or em.max_backtracks == 0:
+                    accepted = True
+                    break
+                if alpha > 1.0:
+                    alpha = 1.0
+                    continue
+                if halvings >= em.max_backtracks:
+                    break
+                alpha *= 0.5
+                halvings += 1
+            if not accepted:
+                log.append(
+                    IterationLog(stage, nll, nll + prior0, 0.0, halvings, sigma2, 0.0, increase)
+                )
+                break
+            eta = min(eta * 1.25, em.overrelaxation) if alpha >= max(eta, 1.0) else 1.0
+            applied = self.model_difference(q, q_try)
+            q = q_try
+            sigma2 = max(est.sigma2_update(posed_try), em.sigma2_min)
+            move = float(np.max(np.abs(applied[self._vi]), initial=0.0))
+            base = float(np.max(np.abs(applied[: self.robot.root_nv]), initial=0.0))
+            log.append(
+                IterationLog(stage, nll, nll + prior0, alpha, halvings, sigma2, move, increase)
+            )
+            if max(move, base) < em.tolerance:
+                break
+        return q, sigma2, nll
+
+    def final_nll(self, S: np.ndarray, q: np.ndarray, sigma2: float, active: np.ndarray) -> float:
+        """Eq. 3 at ``q`` (same E-step mode as the fit)."""
+        em = self.config.em
+        posed = self.template.pose(q, jacobians=False)
+        return e_step(
+            S,
+            posed.points,
+            active,
+            sigma2,
+            em.outlier_weight,
+            mode=em.estep,
+            neighbors=em.neighbors,
+        ).nll
+
+    # ------------------------------------------------------------------ calibration
+    def _initial_pose(self, S: np.ndarray) -> np.ndarray:
+        cal = self.config.calibration
+        q = self.robot.q_reference.copy()
+        for name, value in cal.initial_joints.items():
+            j = self.robot.joint_index(name, path=f"calibration.initial_joints.{name}")
+            q[self.robot.joint_q_index[j]] = float(value)
+        if not self.robot.free_flyer:
+            return q
+        centre = np.median(S, axis=0)
+        if cal.initial_yaw == "auto":
+            yaw = (
+                0.0
+                if self.sensor_position is None
+                else math.atan2(
+                    self.sensor_position[1] - centre[1], self.sensor_position[0] - centre[0]
+                )
+            )
+        else:
+            yaw = float(cal.initial_yaw)
+        q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.0, 0.0, yaw)).coeffs()
+        q[:3] = 0.0
+        posed = self.template.pose(q, jacobians=False)
+        q[0] += centre[0] - np.median(posed.points[:, 0])
+        q[1] += centre[1] - np.median(posed.points[:, 1])
+        q[2] += np.percentile(S[:, 2], 1) - posed.points[:, 2].min()
+        return q
+
+    def calibrate(self, S: np.ndarray, Sn: np.ndarray | None = None) -> np.ndarray:
+        """Fit pose and segment scales to a first (standing) frame; returns the fitted ``q``.
+
+        The scales start from the ratio of the cloud's height to the template's and are bounded
+        by ``calibration.scale_bounds``; left and right segments share one scale.
+        """
+        cal, em = self.config.calibration, self.config.em
+        T = self.template
+        T.set_scales(np.ones(len(T.segment_names)))
+        q = self.robot.q_reference.copy()
+        posed = T.pose(q, jacobians=False)
+        height_model = posed.points[:, 2].max() - posed.points[:, 2].min()
+        height_cloud = np.percentile(S[:, 2], 99.5) - min(np.percentile(S[:, 2], 0.5), 0.0)
+        lo_s, hi_s = (float(x) for x in cal.scale_bounds)
+        s = np.full(len(T.segment_names), float(np.clip(height_cloud / height_model, lo_s, hi_s)))
+        T.set_scales(s)
+        q = self._initial_pose(S)
+        posed = T.pose(q, jacobians=False)
+        active = self._active(posed)
+        d2 = (
+            np.einsum("na,na->n", S, S).mean()
+            + np.einsum("ma,ma->m", posed.points, posed.points)[active].mean()
+            - 2.0 * S.mean(0) @ posed.points[active].mean(0)
+        )
+        sigma2 = float(np.clip(d2 / 3.0, em.sigma2_init, CALIBRATION_SIGMA0**2))
+        # Phase 1: one common scale (robust from far away); phase 2: every segment, with the prior.
+        q, s, sigma2 = self._calibration_phase(
+            S, q, s, sigma2, common=True, iterations=max(cal.iterations // 2, 1)
+        )
+        q, s, sigma2 = self._calibration_phase(
+            S, q, s, sigma2, common=False, iterations=cal.iterations
+        )
+        T.set_scales(s)
+        if cal.personalize:
+            if Sn is None:
+                Sn = estimate_normals(S, self.sensor_position, self.config.input.normals_k)
+            active = self._active(T.pose(q, jacobians=False))
+            self.personalized_points = T.personalize(
+                q, S, Sn, ~active, max_distance=cal.personalize_distance
+            )
+        self.calibration_sigma2 = sigma2
+        self.calibrated = True
+        return q
+
+    def _calibration_phase(
+        self,
+        S: np.ndarray,
+        q: np.ndarray,
+        s: np.ndarray,
+        sigma2: float,
+        *,
+        common: bool,
+        iterations: int,
+    ) -> tuple[np.ndarray, np.ndarray, float]:
+        """EM on pose and scales (one common scale, or one per segment with ``scale_prior``)."""
+        cal, em = self.config.calibration, self.config.em
+        T = self.template
+        lo_s, hi_s = (float(x) for x in cal.scale_bounds)
+        nv, K = self.robot.nv, len(s)
+        ns = 1 if common else K
+        qp = QPProblem(nv + ns, 0)
+        solver = make_solver(self.config.solver, path="solver")
+        vi, qi = self._vi[self._bounded], self._qi[self._bounded]
+        active = self._active(T.pose(q, jacobians=False))
+        for it in range(iterations):
+            posed = T.pose(q)
+            if it % 5 == 0:
+                active = self._active(posed)
+            dense = (sigma2 > CALIBRATION_DENSE_SIGMA**2 and it < 8) or em.estep == "dense"
+            est = e_step(
+                S,
+                posed.points,
+                active,
+                sigma2,
+                em.outlier_weight,
+                mode="dense" if dense else "kdtree",
+                neighbors=max(em.neighbors, 16),
+            )
+            J6 = T.joint_jacobians()
+            Js = T.scale_jacobian(posed)
+            if common:
+                Js = Js.sum(axis=2, keepdims=True)
+            J = np.concatenate([T.point_jacobians(posed, J6), Js], axis=2)
+            E = est.Px - est.P1[:, None] * posed.points
+            Jw = (J * np.sqrt(est.P1)[:, None, None]).reshape(-1, nv + ns)
+            H = Jw.T @ Jw
+            b = J.reshape(-1, nv + ns).T @ E.reshape(-1)
+            if not common and cal.scale_prior > 0:
+                Pm = np.eye(K) - 1.0 / K
+                H[nv:, nv:] += 2 * sigma2 * cal.scale_prior * Pm
+                b[nv:] -= 2 * sigma2 * cal.scale_prior * Pm @ s
+            H[np.diag_indices(nv + ns)] += em.damping * max(np.trace(H) / (nv + ns), 1e-12) + 1e-12
+            qp.H[...], qp.g[...] = H, -b
+            qp.lb[...], qp.ub[...] = -np.inf, np.inf
+            qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
+            qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+            qp.lb[nv:] = lo_s - (s.min() if common else s)
+            qp.ub[nv:] = hi_s - (s.max() if common else s)
+            sol = solver.solve(qp)
+            if sol.x is None:
+                break
+            x = sol.x
+            ds = np.full(K, x[nv]) if common else x[nv:]
+            obj0 = est.q_value(posed, sigma2) + self._scale_prior(s)
+            alpha = 1.0
+            for _ in range(max(em.max_backtracks, 1)):
+                s_try = np.clip(s + alpha * ds, lo_s, hi_s)
+                T.set_scales(s_try)
+                q_try = self._clip(pin.integrate(self.model, q, alpha * x[:nv]))
+                p_try = T.pose(q_try, jacobians=False)
+                if est.q_value(p_try, sigma2) + self._scale_prior(s_try) <= obj0:
+                    break
+                alpha *= 0.5
+            else:
+                T.set_scales(s)
+                break
+            q, s = q_try, s_try
+            sigma2 = max(est.sigma2_update(p_try), em.sigma2_min)
+            if (
+                np.max(np.abs(alpha * x[vi]), initial=0.0) < em.tolerance
+                and np.max(np.abs(alpha * ds)) < 1e-3
+                and sigma2 < CALIBRATION_DENSE_SIGMA**2
+            ):
+                break
+        T.set_scales(s)
+        return q, s, sigma2
+
+    def _scale_prior(self, s: np.ndarray) -> float:
+        w = self.config.calibration.scale_prior
+        return float(w * np.sum((s - s.mean()) ** 2)) if w > 0 else 0.0
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self) -> np.ndarray:
+        """Initial pose of the next frame: third-order auto-regression of the fitted poses (V.B)."""
+        h = self.history
+        if not h:
+            return self.robot.q_reference.copy()
+        if self.config.em.prediction == "constant" or len(h) < 2:
+            return h[-1].copy()
+        model = self.model
+        W = self.config.em.ar_window
+        hh = h[-(W + 1) :]
+        u = np.array([pin.difference(model, a, b) for a, b in zip(hh[:-1], hh[1:], strict=True)])
+        if len(u) < 3:
+            coef = np.array([0.5, 0.0])
+        else:
+            X = np.stack([u[1:-1].reshape(-1), u[:-2].reshape(-1)], axis=1)
+            y = u[2:].reshape(-1)
+            ridge = 1e-3 * max(float(y @ y), 1e-12)
+            coef = np.linalg.solve(X.T @ X + ridge * np.eye(2), X.T @ y)
+            tot = np.abs(coef).sum()
+            if tot > 1.0:
+                coef /= tot
+        u_pred = coef[0] * u[-1] + (coef[1] * u[-2] if len(u) >= 2 else 0.0)
+        return pin.integrate(model, h[-1], u_pred)
+
+    def model_difference(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+        """Tangent step ``q1 - q0`` (nv,)."""
+        return pin.difference(self.model, q0, q1)
+
+    def _clip(self, q: np.ndarray) -> np.ndarray:
+        q = q.copy()
+        qi = self._qi
+        q[qi] = np.clip(q[qi], self.robot.q_min[qi], self.robot.q_max[qi])
+        return q
+
+    # ------------------------------------------------------------------ robot output
+    def robot_configuration(self, q_fit: np.ndarray, support: Support) -> np.ndarray:
+        """Robot configuration: the fitted joints, the primary sole flat on the floor (z = 0).
+
+        While the same foot stays the primary support its sole keeps its first placement (no
+        slip); a new primary foot is put down under the fitted model's sole (x, y and heading).
+        """
+        if not self.robot.free_flyer or not self.robot.feet:
+            return q_fit.copy()
+        foot = (
+            support.primary
+            if support.primary is not None
+            else (self._planted[0] if self._planted is not None else next(iter(self.robot.feet)))
+        )
+        rdata = self.robot.model.createData()
+        pin.framesForwardKinematics(self.robot.model, rdata, q_fit)
+        MF = rdata.oMf[self.robot.frame_id(self.robot.feet[foot].frame)]
+        if self._planted is not None and self._planted[0] == foot and support.primary is not None:
+            target = self._planted[1]
+        else:
+            pin.framesForwardKinematics(self.model, self.template.data, q_fit)
+            fit_sole = self.template.data.oMf[self._sole_ids[foot]]
+            R = fit_sole.rotation
+            yaw = math.atan2(R[1, 0], R[0, 0])
+            target = pin.SE3(
+                pin.rpy.rpyToMatrix(0.0, 0.0, yaw), np.array([*fit_sole.translation[:2], 0.0])
+            )
+            if support.primary is not None:
+                self._planted = (foot, target)
+        base = pin.XYZQUATToSE3(q_fit[:7])
+        new_base = target * MF.inverse() * base
+        q = q_fit.copy()
+        q[:7] = pin.SE3ToXYZQUAT(new_base)
+        return q
+
+    # ------------------------------------------------------------------ one frame
+    def fit(self, frame: CloudFrame | np.ndarray, *, index: int = 0) -> FrameResult:
+        """Fit one frame (calibrating on the first one) and return its :class:`FrameResult`."""
+        t0 = time.perf_counter()
+        em = self.config.em
+        S, Sn = self._prepare(frame, index)
+        log: list[IterationLog] = []
+        q_prev = self.history[-1] if self.history else None
+        if not self.calibrated:
+            q = self.calibrate(S, Sn)
+            sigma2 = max(self.calibration_sigma2, em.sigma2_min)
+            q_prev = None
+        else:
+            q = self._clip(self.predict()) if self.history else self._clip(self._initial_pose(S))
+            sigma2 = em.sigma2_init
+            if em.temporal_reference == "prediction" and q_prev is not None:
+                q_prev = q.copy()
+        status = "ok"
+        support = Support()
+        if self.stability_mode != "none":
+            support = self.tracker.update(self.sole_heights(q))
+            self.rows.set_support(support, q)
+            if self.stability_mode == "qp":
+                q, ok = self._restore_balance(q)
+                if not ok:
+                    status = "relaxed"
+        active = self._active(self.template.pose(q, jacobians=False))
+        q, sigma2, _ = self._em_stage(
+            "linear", S, Sn, q, sigma2, q_prev, active, em.max_iterations, log
+        )
+        for p in range(1, em.visibility_passes):
+            # The visible template points depend on the pose: recompute them at the fit and go on
+            # (a new objective: monotonicity holds within each pass).
+            new_active = self._active(self.template.pose(q, jacobians=False))
+            if np.array_equal(new_active, active):
+                break
+            active = new_active
+            q, sigma2, _ = self._em_stage(
+                f"linear{p + 1}", S, Sn, q, sigma2, q_prev, active, em.max_iterations, log
+            )
+        nll = self.final_nll(S, q, sigma2, active)
+        if em.refine_iterations and Sn is not None:
+            q, sigma2, _ = self._em_stage(
+                "refine", S, Sn, q, sigma2, q_prev, active, em.refine_iterations, log
+            )
+        rule = ""
+        if self.stability_mode == "hip_offset":
+            self.rows.set_support(support, q)
+            q, rule = hip_offset_rule(self.rows, q, self._hips, self._hip_memory)
+        q_robot = self.robot_configuration(q, support)
+        margin = np.nan
+        if self.stability_mode != "none" and support.feet:
+            self.rows.set_support(support, q)
+            margin = self.rows.margin_of(q, full=True)
+            if margin < 0 and status == "ok" and self.stability_mode == "qp":
+                status = "relaxed"
+        self.history.append(q.copy())
+        if len(self.history) > max(em.ar_window + 2, 4):
+            self.history.pop(0)
+        return FrameResult(
+            q,
+            q_robot,
+            sigma2,
+            nll,
+            len(log),
+            support,
+            margin,
+            status,
+            log,
+            time.perf_counter() - t0,
+            rule,
+        )
+
+    # ------------------------------------------------------------------ a sequence
+    def run(
+        self,
+        sequence: CloudSequence,
+        *,
+        progress: bool = False,
+        callback: Callable[[int, FrameResult], None] | None = None,
+    ) -> tuple[RobotTrajectory, list[FrameResult]]:
+        """Fit every frame of ``sequence``; return the run (RobotTrajectory) and frame results."""
+        self.reset()
+        self.sensor_position = sequence.sensor_position
+        if self.sensor_position is None and self.config.input.sensor_position is not None:
+            self.sensor_position = np.asarray(self.config.input.sensor_position, float)
+        frames: Iterable[tuple[int, CloudFrame]] = enumerate(sequence.frames)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(sequence), unit="frame", desc="retarget-cloud")
+        results: list[FrameResult] = []
+        for i, fr in frames:
+            res = self.fit(fr, index=i)
+            results.append(res)
+            if callback is not None:
+                callback(i, res)
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(sigma=f"{math.sqrt(res.sigma2) * 1000:.1f}mm", it=res.iterations)
+        if bar is not None:
+            bar.close()
+        return self.trajectory(sequence, results), results
+
+    def trajectory(self, sequence: CloudSequence, results: list[FrameResult]) -> RobotTrajectory:
+        """The run file content (``docs/formats.md``) of fitted frames."""
+        robot = self.robot
+        t = sequence.t[: len(results)]
+        q = np.array([r.q_robot for r in results])
+        v = np.zeros((len(results), robot.nv))
+        for k in range(1, len(results)):
+            dt = max(t[k] - t[k - 1], 1e-9)
+            v[k] = pin.difference(robot.model, q[k - 1], q[k]) / dt
+        feet = list(robot.feet)
+        contacts = np.array([[f in r.support.feet for f in feet] for r in results], bool).reshape(
+            len(results), len(feet)
+        )
+        robot_spec = self.config.robot
+        controller_yaml = yaml.safe_dump(
+            {
+                "name": f"{self.config.name}_robot",
+                "description": "Robot model of a point-cloud run (qpretarget retarget-cloud); the "
+                "fit's own configuration is in meta.cloud_config.",
+                "robot": robot_spec,
+                "tasks": [{"type": "posture", "name": "posture", "weight": 1.0}],
+                "constraints": [{"type": "joint_limits"}],
+            },
+            sort_keys=False,
+        )
+        extra = {
+            "cloud/q_fit": np.array([r.q_fit for r in results]),
+            "cloud/scales": self.template.scales.copy(),
+            "cloud/segment_names": np.array(self.template.segment_names, dtype=str),
+            "cloud/sigma2": np.array([r.sigma2 for r in results]),
+            "cloud/nll": np.array([r.nll for r in results]),
+            "cloud/iterations": np.array([r.iterations for r in results]),
+            "cloud/com_margin": np.array([r.com_margin for r in results]),
+            "cloud/backtracks": np.array([sum(x.backtracks for x in r.log) for r in results]),
+        }
+        return RobotTrajectory(
+            t=t,
+            q=q,
+            v=v,
+            joint_names=list(robot.joint_names),
+            robot=robot_spec if isinstance(robot_spec, str) else str(robot.urdf_path),
+            config_yaml=controller_yaml,
+            contacts=contacts,
+            foot_names=feet,
+            status=np.array([r.status for r in results]),
+            solve_time=np.array([r.time for r in results]),
+            extra=extra,
+            meta={
+                "command": "retarget-cloud",
+                "source": sequence.source,
+                "cloud_config": self.config.to_yaml(),
+                "template_points": self.template.n_points,
+                "cloud_points": self.config.input.points,
+                "scales": dict(
+                    zip(self.template.segment_names, map(float, self.template.scales), strict=True)
+                ),
+            },
+        )
+
+
+__all__ = ["CloudRetargeter", "EStep", "FrameResult", "IterationLog", "e_step"]

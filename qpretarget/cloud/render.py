@@ -1,0 +1,534 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Synthetic depth images of posed link meshes: pinhole camera, z-buffer, sensor noise, outliers.
+
+This is the test bench of the point-cloud retargeting (Wang 2017 V.A uses a Kinect V2): real meshes
+from example-robot-data -- the robot posed by known joint angles, or the human model
+``human_description`` posed by a mocap clip (:class:`HumanPoser`) -- rendered from a virtual
+pinhole camera.
+
+Rasterisation (:func:`rasterize`) is exact for triangles: a pixel belongs to a triangle when its
+centre falls inside the projected triangle, and its depth is the intersection of the pixel ray
+:math:`d = ((u - c_x)/f_x, (v - c_y)/f_y, 1)` with the triangle's plane,
+:math:`z = (n^\top x_0) / (n^\top d)`. The nearest triangle wins (z-buffer), so a body occludes
+itself. The work is vectorised over triangles, grouped by the size of their pixel bounding box.
+
+Noise model (:func:`corrupt`): Gaussian noise of standard deviation ``noise`` [m] along each pixel
+ray (the depth error of a time-of-flight sensor), then outliers drawn uniformly in a box around
+the subject, so that they are a given fraction of the final cloud.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ConfigError
+from .io import PinholeIntrinsics, depth_to_points
+from .meshes import LinkMeshes
+
+#: Triangles nearer than this to the camera plane are dropped [m].
+NEAR = 0.05
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera placed in the world.
+
+    Attributes:
+        intrinsics: focal lengths, principal point and image size.
+        pose: (4, 4) camera-to-world transform; camera axes x right, y down, z forward (OpenCV).
+    """
+
+    intrinsics: PinholeIntrinsics
+    pose: np.ndarray
+
+    @property
+    def position(self) -> np.ndarray:
+        """Optical centre in the world (3,)."""
+        return self.pose[:3, 3].copy()
+
+
+def look_at(
+    eye: Sequence[float], target: Sequence[float], up: Sequence[float] = (0, 0, 1)
+) -> np.ndarray:
+    """Camera-to-world pose (4, 4) of a camera at ``eye`` looking at ``target`` (OpenCV axes)."""
+    eye, target, up = (np.asarray(x, float) for x in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:
+        raise ConfigError("look_at: the viewing direction is parallel to `up`.")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, y, z], axis=1)
+    T[:3, 3] = eye
+    return T
+
+
+def kinect_camera(eye: Sequence[float], target: Sequence[float], *, downscale: int = 2) -> Camera:
+    """A Kinect V2 depth camera (512 x 424, f = 365 px, Wang 2017 V.A), optionally downscaled."""
+    s = float(downscale)
+    intr = PinholeIntrinsics(
+        fx=365.0 / s,
+        fy=365.0 / s,
+        cx=(512 / s - 1) / 2,
+        cy=(424 / s - 1) / 2,
+        width=int(512 // s),
+        height=int(424 // s),
+    )
+    return Camera(intr, look_at(eye, target))
+
+
+def _min3(a: np.ndarray) -> np.ndarray:
+    return np.minimum(np.minimum(a[:, 0], a[:, 1]), a[:, 2])
+
+
+def _max3(a: np.ndarray) -> np.ndarray:
+    return np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2])
+
+
+def rasterize(
+    triangles_cam: np.ndarray, intrinsics: PinholeIntrinsics
+) -> tuple[np.ndarray, np.ndarray]:
+    """Z-buffer rendering of triangles given in the camera frame.
+
+    Args:
+        triangles_cam: (T, 3, 3) vertices in camera coordinates [m] (z forward).
+        intrinsics: the camera's intrinsics.
+
+    Returns:
+        ``depth`` (H, W) [m], ``inf`` where nothing is seen, and ``index`` (H, W) of the visible
+        triangle (-1 for none).
+    """
+    W, H = intrinsics.width, intrinsics.height
+    fx, fy, cx, cy = intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy
+    depth = np.full(H * W, np.inf)
+    index = np.full(H * W, -1, dtype=np.int64)
+    tri = np.asarray(triangles_cam, float)
+    ids = np.flatnonzero(_min3(tri[:, :, 2]) > NEAR)
+    tri = tri[ids]
+    if len(tri) == 0:
+        return depth.reshape(H, W), index.reshape(H, W)
+    z = tri[:, :, 2]
+    u = fx * tri[:, :, 0] / z + cx
+    v = fy * tri[:, :, 1] / z + cy
+    c0 = np.maximum(np.ceil(_min3(u)), 0).astype(np.int64)
+    c1 = np.minimum(np.floor(_max3(u)), W - 1).astype(np.int64)
+    r0 = np.maximum(np.ceil(_min3(v)), 0).astype(np.int64)
+    r1 = np.minimum(np.floor(_max3(v)), H - 1).astype(np.int64)
+    keep = (c1 >= c0) & (r1 >= r0)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nx0 = np.einsum("ka,ka->k", n, tri[:, 0])
+    size = np.maximum(c1 - c0, r1 - r0) + 1
+    pix_all, z_all, t_all = [], [], []
+    bucket = 1
+    while True:
+        sel = np.flatnonzero(keep & (size <= bucket) & (size > bucket // 2))
+        if len(sel):
+            oy, ox = np.divmod(np.arange(bucket * bucket), bucket)
+            # Process in chunks to bound memory (candidates = triangles x bucket^2).
+            chunk = max(1, 2_000_000 // (bucket * bucket))
+            for s in range(0, len(sel), chunk):
+                k = sel[s : s + chunk]
+                cols = c0[k, None] + ox[None, :]
+                rows = r0[k, None] + oy[None, :]
+                inb = (cols <= c1[k, None]) & (rows <= r1[k, None])
+                ku, kv = u[k], v[k]
+                # Edge functions of the projected triangle at the pixel centres.
+                e0 = (ku[:, 1, None] - ku[:, 0, None]) * (rows - kv[:, 0, None]) - (
+                    kv[:, 1, None] - kv[:, 0, None]
+                ) * (cols - ku[:, 0, None])
+                e1 = (ku[:, 2, None] - ku[:, 1, None]) * (rows - kv[:, 1, None]) - (
+                    kv[:, 2, None] - kv[:, 1, None]
+                ) * (cols - ku[:, 1, None])
+                e2 = (ku[:, 0, None] - ku[:, 2, None]) * (rows - kv[:, 2, None]) - (
+                    kv[:, 0, None] - kv[:, 2, None]
+                ) * (cols - ku[:, 2, None])
+                inside = inb & (
+                    ((e0 >= 0) & (e1 >= 0) & (e2 >= 0)) | ((e0 <= 0) & (e1 <= 0) & (e2 <= 0))
+                )
+                kk, jj = np.nonzero(inside)
+                if len(kk) == 0:
+                    continue
+                cc, rr = cols[kk, jj], rows[kk, jj]
+                tk = k[kk]
+                dx, dy = (cc - cx) / fx, (rr - cy) / fy
+                den = n[tk, 0] * dx + n[tk, 1] * dy + n[tk, 2]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    zz = nx0[tk] / den
+                ok = np.isfinite(zz) & (zz > NEAR)
+                pix_all.append(rr[ok] * W + cc[ok])
+                z_all.append(zz[ok])
+                t_all.append(tk[ok])
+        if bucket >= max(W, H) or not np.any(keep & (size > bucket)):
+            break
+        bucket *= 2
+    if pix_all:
+        pix, zs, ts = np.concatenate(pix_all), np.concatenate(z_all), np.concatenate(t_all)
+        order = np.argsort(zs, kind="stable")
+        upix, first = np.unique(pix[order], return_index=True)
+        depth[upix] = zs[order][first]
+        index[upix] = ids[ts[order][first]]
+    return depth.reshape(H, W), index.reshape(H, W)
+
+
+def render_depth(
+    meshes: LinkMeshes, data: pin.Data, camera: Camera, *, normals: bool = False
+) -> tuple[np.ndarray, ...]:
+    """Depth image and per-pixel link index of meshes posed by a kinematics pass ``data``.
+
+    Returns:
+        ``depth`` (H, W) [m] (``inf`` for background), ``link`` (H, W), the index into
+        ``meshes.link_names`` of the visible link (-1 for background), and with ``normals`` the
+        (H, W, 3) world unit normals of the visible triangles, facing the camera (0 elsewhere).
+    """
+    cam = meshes.posed(data, camera.pose)
+    depth, tri = rasterize(cam, camera.intrinsics)
+    hit = tri >= 0
+    link = np.where(hit, meshes.link[np.maximum(tri, 0)], -1)
+    if not normals:
+        return depth, link
+    t = cam[tri[hit]]
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    n[np.einsum("ka,ka->k", n, t[:, 0]) > 0] *= -1  # face the camera (at the origin)
+    out = np.zeros(depth.shape + (3,))
+    out[hit] = n @ camera.pose[:3, :3].T
+    return depth, link, out
+
+
+def corrupt(
+    points: np.ndarray,
+    camera_position: np.ndarray,
+    *,
+    noise: float,
+    outlier_fraction: float,
+    rng: np.random.Generator,
+    box_margin: float = 0.3,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Add depth noise along the rays and uniform outliers to a world-frame cloud.
+
+    Args:
+        points: (N, 3) clean points [m].
+        camera_position: optical centre (3,) [m]; noise is applied along the ray to each point.
+        noise: standard deviation of the range noise [m] (Gaussian).
+        outlier_fraction: fraction of the *returned* points that are outliers, in [0, 1).
+        rng: random generator.
+        box_margin: outliers are uniform in the points' bounding box grown by this margin [m].
+
+    Returns:
+        ``points`` (N + K, 3) and ``is_outlier`` (N + K,) booleans.
+    """
+    if not 0 <= outlier_fraction < 1:
+        raise ConfigError(f"outlier_fraction must be in [0, 1), got {outlier_fraction!r}.")
+    rays = points - camera_position
+    rng_dist = np.linalg.norm(rays, axis=1, keepdims=True)
+    noisy = camera_position + rays * (
+        1.0 + rng.normal(0.0, noise, size=(len(points), 1)) / rng_dist
+    )
+    k = int(round(outlier_fraction / (1.0 - outlier_fraction) * len(points)))
+    lo, hi = points.min(axis=0) - box_margin, points.max(axis=0) + box_margin
+    lo[2] = max(lo[2], points[:, 2].min())
+    out = rng.uniform(lo, hi, size=(k, 3))
+    return np.concatenate([noisy, out]), np.concatenate(
+        [np.zeros(len(noisy), bool), np.ones(k, bool)]
+    )
+
+
+def render_cloud(
+    meshes: LinkMeshes,
+    data: pin.Data,
+    camera: Camera,
+    *,
+    noise: float = 0.0,
+    outlier_fraction: float = 0.0,
+    rng: np.random.Generator | None = None,
+) -> dict[str, np.ndarray]:
+    """Render, back-project and corrupt: one synthetic sensor frame in world coordinates.
+
+    Returns:
+        ``{"points": (N, 3), "link": (N,) link index (-1 for outliers), "normals": (N, 3) true
+        surface normals (0 for outliers), "clean": (N, 3) points before noise, "depth": (H, W)}``.
+    """
+    rng = rng if rng is not None else np.random.default_rng(0)
+    depth, link, nimg = render_depth(meshes, data, camera, normals=True)
+    pts, pix = depth_to_points(depth, camera.intrinsics, camera.pose, return_pixels=True)
+    lab = link.reshape(-1)[pix]
+    nrm = nimg.reshape(-1, 3)[pix]
+    clean = pts.copy()
+    if noise > 0 or outlier_fraction > 0:
+        pts, is_out = corrupt(
+            pts, camera.position, noise=noise, outlier_fraction=outlier_fraction, rng=rng
+        )
+        k = int(is_out.sum())
+        lab = np.concatenate([lab, np.full(k, -1)])
+        nrm = np.concatenate([nrm, np.zeros((k, 3))])
+        clean = np.concatenate([clean, pts[len(clean) :]])
+    return {"points": pts, "link": lab, "normals": nrm, "clean": clean, "depth": depth}
+
+
+# ------------------------------------------------------------------------ the human model, posed
+#: Key-point tree used to re-proportion a clip to the human model: child -> parent.
+KEYPOINT_TREE: dict[str, str] = {
+    "neck": "waist",
+    "head": "neck",
+    "left_shoulder": "neck",
+    "left_elbow": "left_shoulder",
+    "left_wrist": "left_elbow",
+    "left_hand": "left_wrist",
+    "right_shoulder": "neck",
+    "right_elbow": "right_shoulder",
+    "right_wrist": "right_elbow",
+    "right_hand": "right_wrist",
+    "left_hip": "waist",
+    "left_knee": "left_hip",
+    "left_ankle": "left_knee",
+    "left_toe": "left_ankle",
+    "right_hip": "waist",
+    "right_knee": "right_hip",
+    "right_ankle": "right_knee",
+    "right_toe": "right_ankle",
+}
+
+#: Rotation of the human_description model (y up, x forward, z right) into a z-up world.
+HUMAN_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+HUMAN_URDF = "example-robot-data:human_description/robots/human.urdf"
+
+
+class HumanPoser:
+    """Pose example-robot-data's ``human_description`` model from a mocap clip's key-points.
+
+    The model's limbs follow the clip's limb *directions* with the model's own segment lengths:
+    every tick, the elbow target is the model's current shoulder plus its upper-arm length along
+    the clip's shoulder-to-elbow direction, the wrist target continues from there along the
+    clip's forearm direction, and likewise for hands, knees, ankles and toes. The pelvis follows
+    the clip's waist position and orientation, the torso and head their orientations. The model
+    (with a free-flyer root) is driven by qpretarget's own :class:`~qpretarget.Controller`
+    (position and orientation frame tasks, joint limits as hard bounds), several ticks per frame.
+    Targets are always reachable in length, so the limb directions are the clip's wherever the
+    model's joint limits allow.
+
+    Args:
+        ticks_per_frame: controller ticks per clip frame (more: closer convergence).
+        first_frame_ticks: ticks for the first frame (starting from the neutral pose).
+    """
+
+    CHAINS: tuple[tuple[str, str], ...] = tuple(
+        (c, p)
+        for c, p in KEYPOINT_TREE.items()
+        if p not in ("waist", "neck") and c not in ("neck", "head")
+    )
+
+    def __init__(self, *, ticks_per_frame: int = 8, first_frame_ticks: int = 80) -> None:
+        from ..controller import Controller
+        from ..motion import load_keypoint_map
+
+        self.kmap = load_keypoint_map("human_description")
+        self.driven = [c for c, _ in self.CHAINS]
+        tasks: list[dict] = [
+            {
+                "type": "frame",
+                "name": "waist",
+                "frame": self.kmap.keypoints["waist"].points[0],
+                "mode": "position",
+                "position_weight": 100.0,
+            },
+        ]
+        for name in self.driven:
+            src = self.kmap.keypoints[name]
+            spec = {
+                "type": "frame",
+                "name": name,
+                "frame": src.points[0],
+                "mode": "position",
+                "position_weight": 10.0,
+            }
+            if src.offset is not None:
+                spec["offset"] = list(src.offset)
+            tasks.append(spec)
+        for name, frame in self.kmap.orientations.items():
+            tasks.append(
+                {
+                    "type": "frame",
+                    "name": f"{name}_orientation",
+                    "frame": frame,
+                    "mode": "orientation",
+                    "orientation_weight": 3.0 if name == "waist" else 1.0,
+                }
+            )
+        tasks.append({"type": "posture", "name": "posture", "weight": 1e-3})
+        self.config = {
+            "name": "human_description_ik",
+            "robot": {"urdf": HUMAN_URDF, "free_flyer": True},
+            "dt": 0.05,
+            "regularization": {"type": "identity", "damping": 1e-2},
+            "tasks": tasks,
+            "constraints": [{"type": "joint_limits", "gain": 0.95}],
+        }
+        self.controller = Controller(self.config)
+        self.robot = self.controller.robot
+        self.ticks_per_frame = int(ticks_per_frame)
+        self.first_frame_ticks = int(first_frame_ticks)
+        self.lengths = self._model_lengths()
+
+    def model_keypoints(self, q: np.ndarray) -> dict[str, np.ndarray]:
+        """Key-points (name -> (3,)) of the model at configuration ``q``."""
+        model, data = self.robot.model, self.robot.model.createData()
+        pin.framesForwardKinematics(model, data, q)
+
+        def pos(name: str) -> np.ndarray:
+            return data.oMf[model.getFrameId(name)].translation.copy()
+
+        def rot(name: str) -> np.ndarray:
+            return data.oMf[model.getFrameId(name)].rotation.copy()
+
+        return self.kmap.evaluate(pos, rot)
+
+    def _model_lengths(self) -> dict[str, float]:
+        kp = self.model_keypoints(pin.neutral(self.robot.model))
+        return {c: float(np.linalg.norm(kp[c] - kp[p])) for c, p in KEYPOINT_TREE.items()}
+
+    def _targets(self, clip: Mapping[str, np.ndarray], q: np.ndarray) -> dict[str, np.ndarray]:
+        here = self.model_keypoints(q)
+        out: dict[str, np.ndarray] = {"waist": np.asarray(clip["waist"], float)}
+        for child, parent in self.CHAINS:  # parents come first
+            d = np.asarray(clip[child], float) - np.asarray(clip[parent], float)
+            base = out.get(parent, here[parent])
+            out[child] = base + self.lengths[child] * d / max(float(np.linalg.norm(d)), 1e-9)
+        return out
+
+    def pose_sequence(
+        self,
+        keypoints: Mapping[str, np.ndarray],
+        orientations: Mapping[str, np.ndarray],
+    ) -> np.ndarray:
+        """Configurations (T, nq) of the model following a clip.
+
+        Args:
+            keypoints: key-point -> (T, 3) world positions [m] (z up), e.g. ``motion.keypoints()``.
+            orientations: ``waist``/``torso``/``head`` -> (T, 3, 3) world rotations relative to the
+                clip's rest pose facing +x (``motion.keypoint_orientations()``).
+        """
+        T = len(next(iter(keypoints.values())))
+        ctrl = self.controller
+        q0 = pin.neutral(self.robot.model)
+        q0[:3] = np.asarray(keypoints["waist"][0], float)
+        q0[3:7] = pin.Quaternion(orientations["waist"][0] @ HUMAN_TO_Z_UP).coeffs()
+        ctrl.reset(q0)
+        out = np.empty((T, self.robot.nq))
+        for t in range(T):
+            clip = {k: v[t] for k, v in keypoints.items()}
+            rot = {
+                f"{n}_orientation": orientations[n][t] @ HUMAN_TO_Z_UP
+                for n in self.kmap.orientations
+                if n in orientations
+            }
+            for _ in range(self.first_frame_ticks if t == 0 else self.ticks_per_frame):
+                targets: dict[str, np.ndarray] = dict(rot)
+                targets.update(self._targets(clip, np.asarray(ctrl.q)))
+                ctrl.step(targets)
+            out[t] = ctrl.q
+        return out
+
+
+def joint_observability(
+    model: pin.Model,
+    data: pin.Data,
+    meshes: LinkMeshes,
+    points: np.ndarray,
+    normals: np.ndarray,
+    link: np.ndarray,
+) -> np.ndarray:
+    r"""How much each one-DoF joint moves the visible surface along its normal [m/rad].
+
+    For joint :math:`j` with world axis :math:`a_j` through :math:`o_j`, and the visible points
+    :math:`p` (with normals :math:`n`) of the links it moves,
+    :math:`O_j = \sqrt{\sum_p (n^\top (a_j \times (p - o_j)))^2}`. Depth data only sees motion
+    along the surface normal, so with range noise :math:`\sigma` a joint's angle is measurable
+    to about :math:`\sigma / O_j` (a rotation about a round limb's own axis gives :math:`O_j
+    \approx 0`). ``data`` must hold ``computeJointJacobians`` of the rendered configuration.
+
+    Returns:
+        (njoints,) values indexed by pinocchio joint id (0 for the universe and multi-DoF joints).
+    """
+    out = np.zeros(model.njoints)
+    ok = link >= 0
+    p, n, lk = points[ok], normals[ok], link[ok]
+    # Joint of each visible point: the joint of its link's triangles.
+    link_joint = np.zeros(len(meshes.link_names), dtype=int)
+    link_joint[meshes.link] = meshes.joint
+    pj = link_joint[lk]
+    sub = {j: set(model.subtrees[j]) for j in range(model.njoints)}
+    for j in range(1, model.njoints):
+        jm = model.joints[j]
+        if jm.nv != 1:
+            continue
+        sel = np.isin(pj, list(sub[j]))
+        if not sel.any():
+            continue
+        J = pin.getJointJacobian(model, data, j, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        a = J[3:, jm.idx_v]
+        o = data.oMi[j].translation
+        g = np.einsum("ka,ka->k", n[sel], np.cross(a, p[sel] - o))
+        out[j] = float(np.sqrt(g @ g))
+    return out
+
+
+def joint_uncertainty(
+    model: pin.Model,
+    data: pin.Data,
+    meshes: LinkMeshes,
+    points: np.ndarray,
+    normals: np.ndarray,
+    link: np.ndarray,
+    noise: float,
+    ridge: float = 1e-9,
+) -> np.ndarray:
+    r"""Cramer-Rao standard deviation [rad] of every velocity coordinate from one depth view.
+
+    Each visible point :math:`p` (normal :math:`n`) measures :math:`n^\top p` with range noise
+    ``noise``; with the point Jacobians :math:`J_p` the Fisher information is
+    :math:`F = \sum_p J_p^\top n n^\top J_p / \sigma^2` and the best possible standard deviation
+    of coordinate :math:`i` is :math:`\sqrt{(F^{-1})_{ii}}`. Unlike :func:`joint_observability`
+    this accounts for joints that compensate each other (a shoulder yaw against a wrist roll).
+    ``data`` must hold ``computeJointJacobians`` of the rendered configuration.
+
+    Returns:
+        (nv,) standard deviations (large for coordinates the view cannot determine).
+    """
+    ok = link >= 0
+    p, n, lk = points[ok], normals[ok], link[ok]
+    link_joint = np.zeros(len(meshes.link_names), dtype=int)
+    link_joint[meshes.link] = meshes.joint
+    pj = link_joint[lk]
+    rows = np.zeros((len(p), model.nv))
+    for j in np.unique(pj):
+        sel = pj == j
+        J = pin.getJointJacobian(model, data, int(j), pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        r = p[sel] - data.oMi[int(j)].translation
+        # n^T (J_lin - [r]x J_ang) = n^T J_lin + (r x n)^T J_ang
+        rows[sel] = n[sel] @ J[:3] + np.cross(r, n[sel]) @ J[3:]
+    F = rows.T @ rows / noise**2
+    F[np.diag_indices_from(F)] += ridge * max(float(np.trace(F)), 1e-300)
+    return np.sqrt(np.clip(np.diag(np.linalg.pinv(F)), 0.0, None))
+
+
+__all__ = [
+    "HUMAN_TO_Z_UP",
+    "joint_observability",
+    "joint_uncertainty",
+    "HUMAN_URDF",
+    "Camera",
+    "HumanPoser",
+    "corrupt",
+    "kinect_camera",
+    "look_at",
+    "rasterize",
+    "render_cloud",
+    "render_depth",
+]

@@ -1,0 +1,336 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Static balance of the fitted robot (Wang 2017 IV.B.2, eq. 18-19): QP rows and the paper's rule.
+
+The robot is assumed quasi-static, so it balances when the floor projection of its centre of mass
+(eq. 18) lies in the support polygon SP, the convex hull of the supporting soles. The fitted
+configuration has a free-floating base (the person's pose in the camera's world), so the CoM is
+expressed in the frame :math:`F` of the *primary* supporting sole, which the robot keeps flat on
+the floor:
+
+.. math::
+    c_F = R_F^\top (c - p_F), \qquad
+    \frac{\partial c_F}{\partial q} =
+    R_F^\top \left(J_c - J_{F,lin} + [c - p_F]_\times J_{F,ang}\right),
+
+both invariant to the base pose. With SP's edges :math:`n_k^\top x \le o_k` (shrunk by
+``margin``), each M-step gets the linearized rows
+:math:`n_k^\top (c_{F,xy} + J_{F,xy} \Delta) \le o_k` -- this replaces the paper's after-the-fact
+hip offsets. ``region: inscribed_circle`` uses the paper's stricter region :math:`C_{SP}`, the
+largest disc inside SP (its Chebyshev centre, an LP), as a 16-gon.
+
+:func:`hip_offset_rule` is the paper's own procedure, kept for comparison: :math:`E_b` of eq. 19
+is 0 inside :math:`C_{SP}`, infinite outside SP (offset the hips' pitch/roll by 0.3 rad), and
+otherwise the vector :math:`\vec{op} = o - p_{FCoM}`; when it grows while keeping its direction
+(cosine above cos 30 deg) from one frame to the next, the hips get 0.05 rad. The offset's sign
+moves the CoM towards :math:`o` (read from the CoM Jacobian).
+
+Polygon helpers (convex hull, half-planes) come from :mod:`qpretarget.constraints.support_polygon`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from ..constraints.support_polygon import convex_hull_2d, polygon_halfplanes
+from ..errors import ConfigError
+from ..robot import RobotModel
+
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+#: Number of edges of the polygon approximating the inscribed circle.
+CIRCLE_EDGES = 16
+
+
+def chebyshev_centre(normals: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, float]:
+    r"""Centre and radius of the largest disc inside :math:`\{x : N x \le o\}` (an LP)."""
+    from scipy.optimize import linprog
+
+    A = np.hstack([normals, np.ones((len(normals), 1))])
+    res = linprog([0.0, 0.0, -1.0], A_ub=A, b_ub=offsets, bounds=[(None, None)] * 3, method="highs")
+    if res.status != 0:
+        return np.zeros(2), 0.0
+    return np.asarray(res.x[:2]), float(res.x[2])
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+@dataclass
+class Support:
+    """Supporting feet of one frame.
+
+    Attributes:
+        feet: names of the supporting feet (robot foot names); empty in flight.
+        primary: the foot whose sole frame expresses the polygon (kept flat on the floor).
+    """
+
+    feet: list[str] = field(default_factory=list)
+    primary: str | None = None
+
+
+class SupportTracker:
+    """Support feet from the sole heights of the fitted (HUMROB) model, with hysteresis.
+
+    A foot is supporting when its sole is within ``support_height`` of the lowest sole; it stays
+    supporting until it rises ``release_height`` above it. With the lowest sole higher than
+    ``flight_height`` above the floor (z = 0) nobody supports (flight).
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        *,
+        support_height: float = 0.04,
+        release_height: float = 0.07,
+        flight_height: float = 0.25,
+    ) -> None:
+        if not robot.feet:
+            raise ConfigError(
+                f"robot {robot.name!r} has no feet: stability needs `feet:` in the robot config "
+                "or `stability: {mode: none}`.",
+                path="stability",
+            )
+        self.robot = robot
+        self.support_height = float(support_height)
+        self.release_height = float(max(release_height, support_height))
+        self.flight_height = float(flight_height)
+        self.previous = Support()
+
+    def reset(self) -> None:
+        self.previous = Support()
+
+    def update(self, sole_heights: dict[str, float]) -> Support:
+        """Support of this frame from the sole heights [m] (world z) of the fitted model."""
+        zmin = min(sole_heights.values())
+        if zmin > self.flight_height:
+            self.previous = Support()
+            return self.previous
+        feet = []
+        for f, z in sole_heights.items():
+            thr = self.release_height if f in self.previous.feet else self.support_height
+            if z - zmin <= thr:
+                feet.append(f)
+        primary = (
+            self.previous.primary
+            if self.previous.primary in feet
+            else min(feet, key=lambda f: sole_heights[f])
+        )
+        self.previous = Support(feet, primary)
+        return self.previous
+
+
+class StabilityRows:
+    """Linearized CoM-in-support-polygon rows of the robot model, in the primary sole frame.
+
+    Args:
+        robot: the robot (its own masses and lengths, not the HUMROB scaling).
+        margin: distance kept from every edge [m].
+        region: ``"polygon"`` (SP) or ``"inscribed_circle"`` (:math:`C_{SP}`, Wang 2017 eq. 19).
+        n_rows: fixed number of rows (inactive rows have infinite bounds).
+    """
+
+    def __init__(
+        self, robot: RobotModel, *, margin: float = 0.01, region: str = "polygon", n_rows: int = 16
+    ) -> None:
+        if region not in ("polygon", "inscribed_circle"):
+            raise ConfigError(
+                f"region must be 'polygon' or 'inscribed_circle', got {region!r}.",
+                path="stability.region",
+            )
+        self.robot = robot
+        self.model = robot.model
+        self.data = robot.model.createData()
+        self.margin = float(margin)
+        self.region = region
+        self.n_rows = int(max(n_rows, CIRCLE_EDGES))
+        self.C = np.zeros((self.n_rows, robot.nv))
+        self.u = np.full(self.n_rows, np.inf)
+        self.l = np.full(self.n_rows, -np.inf)
+        self.normals = np.zeros((0, 2))
+        self.offsets = np.zeros(0)
+        self.hull = np.zeros((0, 2))
+        self.support = Support()
+        self._sole_ids = {f: robot.frame_id(d.frame) for f, d in robot.feet.items()}
+
+    # ------------------------------------------------------------------ kinematics
+    def _kinematics(self, q: np.ndarray, jacobians: bool) -> None:
+        if jacobians:
+            pin.computeJointJacobians(self.model, self.data, q)
+            pin.updateFramePlacements(self.model, self.data)
+        else:
+            pin.framesForwardKinematics(self.model, self.data, q)
+
+    def sole_placement(self, q: np.ndarray, foot: str) -> pin.SE3:
+        """World placement of a foot's sole frame for the robot at ``q``."""
+        pin.framesForwardKinematics(self.model, self.data, q)
+        return self.data.oMf[self._sole_ids[foot]].copy()
+
+    def com_in_sole(
+        self, q: np.ndarray, *, jacobian: bool = False
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """CoM in the primary sole frame (3,), and its (3, nv) Jacobian if asked."""
+        self._kinematics(q, jacobian)
+        fid = self._sole_ids[self.support.primary]  # type: ignore[index]
+        M = self.data.oMf[fid]
+        if jacobian:
+            Jc = pin.jacobianCenterOfMass(self.model, self.data, False)
+            c = self.data.com[0]
+        else:
+            c = pin.centerOfMass(self.model, self.data, q, False)
+        d = c - M.translation
+        cF = M.rotation.T @ d
+        if not jacobian:
+            return cF, None
+        Jf = pin.getFrameJacobian(self.model, self.data, fid, LWA)
+        JF = M.rotation.T @ (Jc - Jf[:3] + _skew(d) @ Jf[3:])
+        return cF, JF
+
+    # ------------------------------------------------------------------ polygon
+    def set_support(self, support: Support, q: np.ndarray) -> None:
+        """Build the (shrunk) support region in the primary sole frame for the robot at ``q``."""
+        self.support = support
+        if not support.feet:
+            self.normals, self.offsets, self.hull = np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2))
+            return
+        self._kinematics(q, False)
+        MF = self.data.oMf[self._sole_ids[support.primary]]  # type: ignore[index]
+        pts = []
+        for f in support.feet:
+            x0, x1, y0, y1 = self.robot.feet[f].rectangle
+            local = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+            M = self.data.oMf[self._sole_ids[f]]
+            world = local @ M.rotation.T + M.translation
+            pts.append(((world - MF.translation) @ MF.rotation)[:, :2])
+        self.hull = convex_hull_2d(np.concatenate(pts))
+        n, o = polygon_halfplanes(self.hull, 0.0)
+        self.full_normals, self.full_offsets = n, o
+        self.centre, self.radius = chebyshev_centre(n, o)
+        margin = min(self.margin, 0.9 * self.radius)
+        if self.region == "polygon":
+            self.normals, self.offsets = n, o - margin
+        else:
+            a = 2 * np.pi * (np.arange(CIRCLE_EDGES) + 0.5) / CIRCLE_EDGES
+            nc = np.stack([np.cos(a), np.sin(a)], axis=1)
+            self.normals = nc
+            self.offsets = nc @ self.centre + np.cos(np.pi / CIRCLE_EDGES) * max(
+                self.radius - margin, 0.0
+            )
+        if len(self.normals) > self.n_rows:
+            raise ConfigError(
+                f"the support polygon has {len(self.normals)} edges, more than {self.n_rows} rows."
+            )
+
+    def margin_of(self, q: np.ndarray, *, full: bool = False) -> float:
+        """Signed distance [m] of the projected CoM inside the region (``full``: unshrunk SP)."""
+        if not self.support.feet:
+            return np.inf
+        cF, _ = self.com_in_sole(q)
+        n, o = (self.full_normals, self.full_offsets) if full else (self.normals, self.offsets)
+        return float(np.min(o - n @ cF[:2]))
+
+    def rows(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        r"""Rows ``(C, l, u)``: :math:`n_k^\top J_{F,xy} \Delta \le o_k - n_k^\top c_{F,xy}`."""
+        self.C[...] = 0.0
+        self.u[...] = np.inf
+        k = len(self.normals)
+        if k:
+            cF, JF = self.com_in_sole(q, jacobian=True)
+            self.C[:k] = self.normals @ JF[:2]  # type: ignore[index]
+            self.u[:k] = self.offsets - self.normals @ cF[:2]
+        return self.C, self.l, self.u
+
+
+def hip_joint_indices(robot: RobotModel, names: Sequence[str] | None = None) -> np.ndarray:
+    """Velocity indices of the hip pitch/roll joints (names containing ``hip`` and pitch/roll)."""
+    if names is None:
+        names = [
+            n
+            for n in robot.joint_names
+            if "hip" in n.lower() and ("pitch" in n.lower() or "roll" in n.lower())
+        ]
+        if not names:
+            raise ConfigError(
+                f"robot {robot.name!r} has no joint named like '*hip*pitch*' or '*hip*roll*'; "
+                "list them in stability.hip_joints.",
+                path="stability.hip_joints",
+            )
+    return np.array(
+        [robot.joint_v_index[robot.joint_index(n, path="stability.hip_joints")] for n in names],
+        dtype=int,
+    )
+
+
+@dataclass
+class HipRuleState:
+    r"""Memory of the paper's rule: the previous :math:`\vec{op}` (or None)."""
+
+    op: np.ndarray | None = None
+
+
+def hip_offset_rule(
+    rows: StabilityRows,
+    q: np.ndarray,
+    hips: np.ndarray,
+    memory: HipRuleState,
+    *,
+    large: float = 0.3,
+    small: float = 0.05,
+) -> tuple[np.ndarray, str]:
+    """Wang 2017 eq. 19 and IV.B.2: offset the hips when the CoM leaves (or heads out of) C_SP.
+
+    Args:
+        rows: stability rows with the frame's support set (:meth:`StabilityRows.set_support`).
+        q: fitted configuration (nq,).
+        hips: velocity indices of the hip pitch/roll joints.
+        memory: the rule's state across frames (updated).
+        large: the paper's offset outside SP [rad] (0.3).
+        small: the paper's offset when the CoM heads out of C_SP [rad] (0.05).
+
+    Returns:
+        The corrected configuration and what the rule did (``inside``, ``outside``, ``heading``,
+        ``margin``, ``flight``).
+    """
+    robot = rows.robot
+    if not rows.support.feet:
+        memory.op = None
+        return q, "flight"
+    cF, JF = rows.com_in_sole(q, jacobian=True)
+    c = cF[:2]
+    inside_sp = bool(np.all(rows.full_normals @ c <= rows.full_offsets))
+    if np.linalg.norm(c - rows.centre) <= rows.radius:
+        memory.op = None
+        return q, "inside"
+    op = rows.centre - c
+    prev = memory.op
+    memory.op = op
+    if not inside_sp:
+        offset, what = large, "outside"
+    else:
+        if prev is None:
+            return q, "margin"
+        cos = float(op @ prev / max(np.linalg.norm(op) * np.linalg.norm(prev), 1e-12))
+        if not (cos > np.cos(np.deg2rad(30.0)) and np.linalg.norm(op) > np.linalg.norm(prev)):
+            return q, "margin"
+        offset, what = small, "heading"
+    step = np.zeros(robot.nv)
+    step[hips] = offset * np.sign(op @ JF[:2, hips])  # type: ignore[index]
+    q_new = pin.integrate(robot.model, q, step)
+    qi = robot.joint_q_index
+    q_new[qi] = np.clip(q_new[qi], robot.q_min[qi], robot.q_max[qi])
+    return q_new, what
+
+
+__all__ = [
+    "HipRuleState",
+    "StabilityRows",
+    "Support",
+    "SupportTracker",
+    "chebyshev_centre",
+    "hip_joint_indices",
+    "hip_offset_rule",
+]

@@ -1,0 +1,583 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""The HUMROB template (Wang 2017 IV.A): the robot's joints with the subject's proportions.
+
+Points and outward normals are sampled uniformly (by area) on the robot's link meshes and attached
+rigidly to the joints that move them. Each body *segment* (pelvis, torso, head, upper arm, forearm,
+hand, thigh, shank, foot; left and right share one value) carries a scale factor
+:math:`s_k`: the joint placements inside the segment and the segment's template points are
+multiplied by it, so the model keeps the robot's joint axes, limits and degrees of freedom while
+its limb lengths become the subject's (estimated from a first frame, :mod:`.em`).
+
+Posed template point :math:`m` on joint :math:`j` (rigid attachment):
+
+.. math:: v_m = p_j + R_j\, (s_{k(j)}\, v_m^0),
+
+and with linear blend skinning (Wang 2017 eq. 9), points closer than ``blend_radius`` to their
+joint are also carried by the parent joint :math:`i`:
+:math:`v_m = (1 - w_m)\, T_j v_m^{0} + w_m\, T_i v_m^{0,i}`, :math:`w_m = \tfrac12 (1 - d_m/r)`,
+with :math:`v_m^{0,i}` the point in the parent's frame at the reference posture.
+
+Jacobians (Wang 2017 eq. 14 linearized; :meth:`Template.normal_equations`): with :math:`J_j` the
+joint's (6, nv) Jacobian in LOCAL_WORLD_ALIGNED and :math:`r_m = v_m - p_j`,
+
+.. math:: \frac{\partial v_m}{\partial q} = J_{j,lin} - [r_m]_\times J_{j,ang},
+
+and for a rigid template the sums over the points of one joint collapse into 6x6 moments, so the
+Gauss-Newton matrix :math:`\sum_m P_m J_m^\top J_m` costs one pass over the points plus one
+(6 x nv) product per joint.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ConfigError
+from ..robot import RobotModel
+from .meshes import LinkMeshes, load_link_meshes
+
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+#: Segment of each robot key-point (RobotModel.keyframes); the segment starts at that key-point's
+#: joint and runs to the next key-point down the tree. Left and right share a segment.
+SEGMENT_OF_KEYPOINT: dict[str, str] = {
+    "torso": "torso",
+    "head": "head",
+    "left_shoulder": "upper_arm",
+    "right_shoulder": "upper_arm",
+    "left_elbow": "forearm",
+    "right_elbow": "forearm",
+    "left_wrist": "hand",
+    "right_wrist": "hand",
+    "left_hip": "thigh",
+    "right_hip": "thigh",
+    "left_knee": "shank",
+    "right_knee": "shank",
+    "left_ankle": "foot",
+    "right_ankle": "foot",
+}
+
+ROOT_SEGMENT = "pelvis"
+
+
+def skew_batch(r: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) skew matrices with ``skew(r) @ x == cross(r, x)``."""
+    S = np.zeros(r.shape[:-1] + (3, 3))
+    S[..., 0, 1], S[..., 0, 2] = -r[..., 2], r[..., 1]
+    S[..., 1, 0], S[..., 1, 2] = r[..., 2], -r[..., 0]
+    S[..., 2, 0], S[..., 2, 1] = -r[..., 1], r[..., 0]
+    return S
+
+
+def _view_directions() -> np.ndarray:
+    """26 unit directions: cube faces, edges and corners."""
+    g = np.array(
+        [
+            (x, y, z)
+            for x in (-1, 0, 1)
+            for y in (-1, 0, 1)
+            for z in (-1, 0, 1)
+            if (x, y, z) != (0, 0, 0)
+        ],
+        float,
+    )
+    return g / np.linalg.norm(g, axis=1, keepdims=True)
+
+
+def _outer_points(
+    points: np.ndarray, normals: np.ndarray, cell: float = 0.01
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points seen from one of 26 directions (point z-buffer), and normal-orientation votes.
+
+    Returns:
+        ``seen`` (K,) booleans and ``vote`` (K,): positive when the normal mostly faces the
+        directions the point is seen from.
+    """
+    seen = np.zeros(len(points), bool)
+    vote = np.zeros(len(points))
+    for d in _view_directions():
+        a = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
+        a /= np.linalg.norm(a)
+        b = np.cross(d, a)
+        depth = points @ d
+        cu = np.floor(points @ a / cell).astype(np.int64)
+        cv = np.floor(points @ b / cell).astype(np.int64)
+        key = (cu - cu.min()) * (cv.max() - cv.min() + 1) + (cv - cv.min())
+        _, inv = np.unique(key, return_inverse=True)
+        front = np.full(int(inv.max()) + 1, np.inf)
+        np.minimum.at(front, inv, depth)
+        vis = np.flatnonzero(depth <= front[inv] + cell)
+        seen[vis] = True
+        vote[vis] -= np.sign(normals[vis] @ d)
+    return seen, vote
+
+
+def _even_subset(points: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Indices of ``n`` evenly spread points: one per voxel (size by bisection), ``n`` at random."""
+    if len(points) <= n:
+        return np.arange(len(points))
+    extent = float(np.max(points.max(0) - points.min(0)))
+    lo, hi = 1e-5, extent
+    best = None
+    perm = rng.permutation(len(points))
+    pp = points[perm] - points.min(0)
+    for _ in range(30):
+        v = 0.5 * (lo + hi)
+        key = np.floor(pp / v).astype(np.int64)
+        dims = key.max(0) + 1
+        lin = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
+        _, first = np.unique(lin, return_index=True)
+        if len(first) >= n:
+            best, lo = perm[first], v
+        else:
+            hi = v
+        if hi - lo < 1e-4 * extent:
+            break
+    if best is None:
+        best = perm
+    return np.sort(rng.choice(best, size=n, replace=False))
+
+
+def _sandwich(J: np.ndarray, K: np.ndarray) -> np.ndarray:
+    r""":math:`\sum_j J_j^\top K_j J_j` for stacks J (n, a, nv) and K (n, a, a), as one product."""
+    n, a, nv = J.shape
+    return J.reshape(n * a, nv).T @ np.matmul(K, J).reshape(n * a, nv)
+
+
+@dataclass
+class PosedTemplate:
+    """Template at one configuration: world points (M, 3), unit normals (M, 3) and the data."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    offsets: np.ndarray  # (M, 3) r_m = v_m - p_j (world axes), rigid part
+    R: np.ndarray  # (njoints, 3, 3)
+    p: np.ndarray  # (njoints, 3)
+
+
+def segments_of_joints(robot: RobotModel) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Segment index of every pinocchio joint (njoints,), and the segment names.
+
+    A joint belongs to the segment of its nearest key-point joint, itself included, going up the
+    tree; joints above every key-point belong to the pelvis.
+    """
+    model = robot.model
+    names = [ROOT_SEGMENT]
+    key_seg: dict[int, int] = {}
+    for key, seg in SEGMENT_OF_KEYPOINT.items():
+        frame = robot.keyframes.get(key)
+        if frame is None or not model.existFrame(frame):
+            continue
+        j = model.frames[model.getFrameId(frame)].parentJoint
+        if j in key_seg or j <= 1:  # the joint already starts a segment (or is the root)
+            continue
+        if seg not in names:
+            names.append(seg)
+        key_seg[j] = names.index(seg)
+    seg = np.zeros(model.njoints, dtype=int)
+    for j in range(1, model.njoints):
+        i = j
+        while i > 0 and i not in key_seg:
+            i = model.parents[i]
+        seg[j] = key_seg.get(i, 0)
+    return seg, tuple(names)
+
+
+class Template:
+    """HUMROB template: sampled surface points on the robot's links, scalable per segment.
+
+    Args:
+        robot: the robot (its kinematics, limits and key-points).
+        n_points: number of template points (Wang 2017 V.B: 5,000).
+        meshes: ``"visual"`` or ``"collision"`` link meshes, or a ready :class:`LinkMeshes`.
+        skinning: ``"rigid"`` or ``"lbs"`` (linear blend skinning, Wang 2017 eq. 9).
+        blend_radius: distance from a joint within which points are blended with the parent [m].
+        seed: random seed of the sampling.
+        exclude_links: link names left out of the template (e.g. props, logos).
+        link_density_exponent: points per link proportional to its outer area to this power
+            (1: uniform density; below 1: small links, which carry the distal joints, get more).
+
+    Attributes:
+        model: the HUMROB kinematic model (a copy of the robot's, with scaled segments).
+        scales: (K,) current segment scales, in the order of :attr:`segment_names`.
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        *,
+        n_points: int = 5000,
+        meshes: str | LinkMeshes = "visual",
+        skinning: str = "rigid",
+        blend_radius: float = 0.04,
+        seed: int = 0,
+        exclude_links: Sequence[str] = (),
+        link_density_exponent: float = 1.0,
+    ) -> None:
+        if skinning not in ("rigid", "lbs"):
+            raise ConfigError(
+                f"skinning must be 'rigid' or 'lbs', got {skinning!r}.", path="template.skinning"
+            )
+        if not (isinstance(n_points, int) and n_points >= 50):
+            raise ConfigError(
+                f"template points must be an integer >= 50, got {n_points!r}.",
+                path="template.points",
+            )
+        self.robot = robot
+        self.skinning = skinning
+        self.blend_radius = float(blend_radius)
+        self.link_density_exponent = float(link_density_exponent)
+        lm = (
+            meshes
+            if isinstance(meshes, LinkMeshes)
+            else load_link_meshes(robot.model, robot.urdf_path, meshes)
+        )
+        self.meshes = lm
+        keep = ~np.isin(np.array(lm.link_names)[lm.link], list(exclude_links))
+        self._sample(lm, keep, n_points, np.random.default_rng(seed))
+        self.seg_of_joint, self.segment_names = segments_of_joints(robot)
+        self.point_segment = self.seg_of_joint[self.joint]
+        # Placement translations live in the parent joint's link: scale with the parent's segment.
+        model0 = robot.model
+        self._t0 = np.array([M.translation.copy() for M in model0.jointPlacements])
+        self._seg_t = np.array(
+            [self.seg_of_joint[model0.parents[j]] if j > 0 else 0 for j in range(model0.njoints)]
+        )
+        self._frame_t0 = np.array([f.placement.translation.copy() for f in model0.frames])
+        self._frame_seg = np.array([self.seg_of_joint[f.parentJoint] for f in model0.frames])
+        self.model = pin.Model(model0)
+        self.data = self.model.createData()
+        # Ancestor matrix: A[j, i] = 1 when joint i is j or one of its ancestors (i >= 1).
+        nj = model0.njoints
+        A = np.zeros((nj, nj))
+        for j in range(1, nj):
+            i = j
+            while i > 0:
+                A[j, i] = 1.0
+                i = model0.parents[i]
+        self._ancestors = A
+        self._parents = np.array(model0.parents)
+        self.scales = np.ones(len(self.segment_names))
+        self.set_scales(self.scales)
+
+    # ------------------------------------------------------------------ sampling
+    def _sample(self, lm: LinkMeshes, keep: np.ndarray, n: int, rng: np.random.Generator) -> None:
+        """Outer-surface, evenly spaced template points with outward normals.
+
+        1. ``max(12 n, 40000)`` candidates uniform by area on the link triangles;
+        2. at the reference posture, keep the candidates seen from at least one of 26 directions
+           (cube faces, edges and corners) by a point z-buffer of 1 cm cells: the meshes' inner
+           faces and hidden parts are dropped, and each normal is turned towards the directions
+           it is seen from;
+        3. one candidate per voxel, with the voxel size that leaves at least ``n`` voxels, then
+           ``n`` of them at random: an even spacing (random sampling leaves clumps and holes,
+           which make the mixture's likelihood rugged).
+        """
+        tris = lm.triangles[keep]
+        joint, link = lm.joint[keep], lm.link[keep]
+        cr = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        area = 0.5 * np.linalg.norm(cr, axis=1)
+        ok = area > 1e-12
+        tris, joint, link, cr, area = tris[ok], joint[ok], link[ok], cr[ok], area[ok]
+        normal = cr / (2 * area[:, None])
+        n_cand = max(12 * n, 40000)
+        idx = rng.choice(len(tris), size=n_cand, p=area / area.sum())
+        r1, r2 = rng.random(n_cand), rng.random(n_cand)
+        s1 = np.sqrt(r1)
+        T = tris[idx]
+        pts = (
+            (1 - s1)[:, None] * T[:, 0]
+            + (s1 * (1 - r2))[:, None] * T[:, 1]
+            + (s1 * r2)[:, None] * T[:, 2]
+        )
+        nrm, jnt, lnk = normal[idx], joint[idx], link[idx]
+        data = self.robot.model.createData()
+        pin.forwardKinematics(self.robot.model, data, self.robot.q_reference)
+        R = np.array([M.rotation for M in data.oMi])
+        p = np.array([M.translation for M in data.oMi])
+        world = np.einsum("kab,kb->ka", R[jnt], pts) + p[jnt]
+        wn = np.einsum("kab,kb->ka", R[jnt], nrm)
+        seen, vote = _outer_points(world, wn)
+        if seen.sum() < n:  # degenerate geometry: keep everything
+            seen[:] = True
+        flip = vote < 0
+        nrm[flip] *= -1
+        cand = np.flatnonzero(seen)
+        gamma = self.link_density_exponent
+        if gamma >= 1.0:
+            sel = cand[_even_subset(world[cand], n, rng)]
+        else:
+            # Points per link proportional to (outer area)^gamma: small distal links get more.
+            lk = lnk[cand]
+            cnt = np.bincount(lk, minlength=int(lnk.max()) + 1).astype(float)
+            share = np.where(cnt > 0, cnt**gamma, 0.0)
+            quota = np.floor(n * share / share.sum()).astype(int)
+            quota = np.minimum(quota, cnt.astype(int))
+            short = n - quota.sum()
+            while short > 0:  # hand out the remainder where candidates are left
+                room = np.flatnonzero(quota < cnt)
+                add = room[np.argsort(-(share[room] - quota[room]))][:short]
+                quota[add] += 1
+                short = n - quota.sum()
+            parts = []
+            for li in np.flatnonzero(quota):
+                c = cand[lk == li]
+                parts.append(c[_even_subset(world[c], int(quota[li]), rng)])
+            sel = np.concatenate(parts)
+        order = np.argsort(jnt[sel], kind="stable")
+        sel = sel[order]
+        self.points0 = pts[sel]
+        self.normals0 = nrm[sel]
+        self.joint = jnt[sel]
+        self.link = lnk[sel]
+
+    @property
+    def n_points(self) -> int:
+        """Number of template points M."""
+        return len(self.points0)
+
+    # ------------------------------------------------------------------ scaling
+    def set_scales(self, scales: np.ndarray) -> None:
+        """Apply segment scales (K,) to the model's joint/frame placements and to the points."""
+        s = np.asarray(scales, float).copy()
+        if s.shape != (len(self.segment_names),) or np.any(s <= 0):
+            raise ConfigError(
+                f"scales must be {len(self.segment_names)} positive numbers, got {scales!r}."
+            )
+        self.scales = s
+        for j in range(1, self.model.njoints):
+            self.model.jointPlacements[j].translation = self._t0[j] * s[self._seg_t[j]]
+        for f in range(len(self.model.frames)):
+            self.model.frames[f].placement.translation = self._frame_t0[f] * s[self._frame_seg[f]]
+        self.data = self.model.createData()
+        self.local = self.points0 * s[self.point_segment][:, None]
+        self._setup_blend()
+
+    def _setup_blend(self) -> None:
+        """Blend weights and parent-frame coordinates of the LBS points (reference posture)."""
+        self.blend = np.zeros(0, dtype=int)
+        self.used_joints = np.unique(self.joint)
+        self._group = np.searchsorted(self.used_joints, self.joint)
+        if self.skinning != "lbs":
+            return
+        parent = self._parents[self.joint]
+        d = np.linalg.norm(self.local, axis=1)
+        sel = np.flatnonzero((parent > 0) & (d < self.blend_radius))
+        self.blend = sel
+        self.blend_weight = 0.5 * (1.0 - d[sel] / self.blend_radius)
+        self.blend_parent = parent[sel]
+        # Jacobians are needed for the parents too.
+        self.used_joints = np.union1d(self.used_joints, self.blend_parent)
+        self._group = np.searchsorted(self.used_joints, self.joint)
+        self._blend_group = np.searchsorted(self.used_joints, self.blend_parent)
+        pin.forwardKinematics(self.model, self.data, self.robot.q_reference)
+        R = np.array([M.rotation for M in self.data.oMi])
+        p = np.array([M.translation for M in self.data.oMi])
+        j, i = self.joint[sel], self.blend_parent
+        world = np.einsum("kab,kb->ka", R[j], self.local[sel]) + p[j]
+        self.blend_local = np.einsum("kba,kb->ka", R[i], world - p[i])
+
+    def personalize(
+        self,
+        q: np.ndarray,
+        points: np.ndarray,
+        normals: np.ndarray,
+        keep: np.ndarray,
+        *,
+        max_distance: float,
+    ) -> int:
+        """Give the template the subject's own surface (Wang 2017 IV.A, personalised model).
+
+        Observed points (world, fitted at configuration ``q`` with the current scales) closer than
+        ``max_distance`` to a template point are attached rigidly to that point's joint (nearest
+        neighbour, the k-NN transfer of the paper) and replace the template points ``~keep``
+        (those the sensor saw); the others (back side, hidden parts) stay the robot's.
+
+        Returns:
+            The number of observed points attached.
+        """
+        from scipy.spatial import cKDTree
+
+        posed = self.pose(q, jacobians=False)
+        seen = np.flatnonzero(~keep)
+        if len(seen) == 0:
+            return 0
+        dist, nb = cKDTree(posed.points[seen]).query(points)
+        ok = dist <= max_distance
+        if not ok.any():
+            return 0
+        src = seen[nb[ok]]
+        j = self.joint[src]
+        R, p = posed.R[j], posed.p[j]
+        local = np.einsum("kba,kb->ka", R, points[ok] - p)
+        nloc = np.einsum("kba,kb->ka", R, normals[ok])
+        seg = self.seg_of_joint[j]
+        kept = np.flatnonzero(keep)
+        self.points0 = np.concatenate([self.points0[kept], local / self.scales[seg][:, None]])
+        self.normals0 = np.concatenate([self.normals0[kept], nloc])
+        self.joint = np.concatenate([self.joint[kept], j])
+        self.link = np.concatenate([self.link[kept], self.link[src]])
+        order = np.argsort(self.joint, kind="stable")
+        self.points0, self.normals0 = self.points0[order], self.normals0[order]
+        self.joint, self.link = self.joint[order], self.link[order]
+        self.point_segment = self.seg_of_joint[self.joint]
+        self.set_scales(self.scales)
+        return int(ok.sum())
+
+    def frame_scale(self, frame_id: int) -> float:
+        """Scale factor of the segment a frame belongs to."""
+        return float(self.scales[self._frame_seg[frame_id]])
+
+    # ------------------------------------------------------------------ kinematics
+    def pose(self, q: np.ndarray, *, jacobians: bool = True) -> PosedTemplate:
+        """Forward kinematics (and joint Jacobians) of the HUMROB model: points and normals."""
+        model, data = self.model, self.data
+        if jacobians:
+            pin.computeJointJacobians(model, data, q)
+        else:
+            pin.forwardKinematics(model, data, q)
+        R = np.array([M.rotation for M in data.oMi])
+        p = np.array([M.translation for M in data.oMi])
+        Rj = R[self.joint]
+        off = np.einsum("mab,mb->ma", Rj, self.local)
+        pts = off + p[self.joint]
+        nrm = np.einsum("mab,mb->ma", Rj, self.normals0)
+        if len(self.blend):
+            w = self.blend_weight[:, None]
+            i = self.blend_parent
+            other = np.einsum("kab,kb->ka", R[i], self.blend_local) + p[i]
+            pts[self.blend] = (1 - w) * pts[self.blend] + w * other
+        return PosedTemplate(pts, nrm, off, R, p)
+
+    def joint_jacobians(self) -> np.ndarray:
+        """(J, 6, nv) LOCAL_WORLD_ALIGNED Jacobians of :attr:`used_joints` (after :meth:`pose`)."""
+        return np.array(
+            [pin.getJointJacobian(self.model, self.data, int(j), LWA) for j in self.used_joints]
+        )
+
+    def point_jacobians(
+        self, posed: PosedTemplate, J6: np.ndarray, index: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Explicit (K, 3, nv) Jacobians of template points ``index`` (default: all).
+
+        Used for blended (LBS) points and in tests; the rigid M-step uses
+        :meth:`normal_equations` instead.
+        """
+        idx = np.arange(self.n_points) if index is None else np.asarray(index)
+        g = self._group[idx]
+        Jl, Ja = J6[g, :3], J6[g, 3:]
+        r = posed.offsets[idx]
+        out = Jl - np.einsum("kab,kbn->kan", skew_batch(r), Ja)
+        if len(self.blend):
+            pos = np.minimum(np.searchsorted(self.blend, idx), len(self.blend) - 1)
+            hit = self.blend[pos] == idx
+            if hit.any():
+                k = pos[hit]
+                Jp = J6[self._blend_group[k]]
+                rp = np.einsum("kab,kb->ka", posed.R[self.blend_parent[k]], self.blend_local[k])
+                Jpar = Jp[:, :3] - np.einsum("kab,kbn->kan", skew_batch(rp), Jp[:, 3:])
+                w = self.blend_weight[k][:, None, None]
+                out[hit] = (1 - w) * out[hit] + w * Jpar
+        return out
+
+    def normal_equations(
+        self,
+        posed: PosedTemplate,
+        J6: np.ndarray,
+        P1: np.ndarray,
+        E: np.ndarray,
+        *,
+        normal_weight: float = 0.0,
+        P1n: np.ndarray | None = None,
+        En: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        r"""Gauss-Newton matrix and vector of the M-step (Wang 2017 eq. 13, 15 linearized).
+
+        .. math::
+            H = \sum_m P_m J_m^\top J_m
+                + \lambda_\perp \sum_m P_m J_{\omega}^\top (I - n_m n_m^\top) J_{\omega},\quad
+            b = \sum_m J_m^\top e_m + \lambda_\perp \sum_m J_\omega^\top (n_m \times e^\perp_m)
+
+        with :math:`P_m = \sum_n p_{mn}`, :math:`e_m = \sum_n p_{mn} s_n - P_m v_m` and
+        :math:`e^\perp_m = \sum_n p_{mn} s^\perp_n - P_m n_m`; the step minimises
+        :math:`\tfrac12 \Delta^\top H \Delta - b^\top \Delta` (divide both by :math:`\sigma^2`).
+
+        Args:
+            posed: the posed template.
+            J6: (J, 6, nv) joint Jacobians (:meth:`joint_jacobians`).
+            P1: (M,) posterior mass per point.
+            E: (M, 3) position residual sums :math:`e_m`.
+            normal_weight: :math:`\lambda_\perp`.
+            P1n: (M,) posterior mass per point of the normal term.
+            En: (M, 3) normal residual sums :math:`e^\perp_m`.
+        """
+        if len(self.blend):
+            Jm = self.point_jacobians(posed, J6)
+            Jw = Jm * np.sqrt(P1)[:, None, None]
+            H = np.einsum("man,mak->nk", Jw, Jw)
+            b = np.einsum("man,ma->n", Jm, E)
+        else:
+            g, nJ = self._group, len(self.used_joints)
+            r = posed.offsets
+            w0 = np.bincount(g, P1, nJ)
+            c = np.stack([np.bincount(g, P1 * r[:, a], nJ) for a in range(3)], 1)
+            rr = np.stack(
+                [np.bincount(g, P1 * r[:, a] * r[:, b], nJ) for a in range(3) for b in range(3)], 1
+            ).reshape(nJ, 3, 3)
+            K = np.zeros((nJ, 6, 6))
+            K[:, 0, 0] = K[:, 1, 1] = K[:, 2, 2] = w0
+            Sc = skew_batch(c)
+            K[:, :3, 3:] = -Sc
+            K[:, 3:, :3] = Sc
+            K[:, 3:, 3:] = np.trace(rr, axis1=1, axis2=2)[:, None, None] * np.eye(3) - rr
+            f = np.stack([np.bincount(g, E[:, a], nJ) for a in range(3)], 1)
+            tq = np.cross(r, E)
+            tau = np.stack([np.bincount(g, tq[:, a], nJ) for a in range(3)], 1)
+            H = _sandwich(J6, K)
+            b = np.einsum("jan,ja->n", J6, np.concatenate([f, tau], 1))
+        if normal_weight > 0 and P1n is not None and En is not None:
+            g, nJ = self._group, len(self.used_joints)
+            n = posed.normals
+            nn = np.stack(
+                [np.bincount(g, P1n * n[:, a] * n[:, b], nJ) for a in range(3) for b in range(3)], 1
+            ).reshape(nJ, 3, 3)
+            w0 = np.bincount(g, P1n, nJ)
+            Kn = w0[:, None, None] * np.eye(3) - nn
+            tn = np.cross(n, En)
+            tau = np.stack([np.bincount(g, tn[:, a], nJ) for a in range(3)], 1)
+            Ja = J6[:, 3:]
+            H = H + normal_weight * _sandwich(Ja, Kn)
+            b = b + normal_weight * np.einsum("jan,ja->n", Ja, tau)
+        return H, b
+
+    # ------------------------------------------------------------------ scale Jacobian
+    def scale_jacobian(self, posed: PosedTemplate) -> np.ndarray:
+        r"""(M, 3, K) derivative of the posed points with respect to the segment scales.
+
+        Points are linear in the scales at fixed joint angles:
+        :math:`v_m = p_{root} + \sum_{i \preceq j} s_{k(i)} R_{\pi(i)} t_i^0 + s_{k(j)} R_j v^0_m`.
+        """
+        K = len(self.segment_names)
+        R, par = posed.R, self._parents
+        D = np.zeros((self.model.njoints, 3))
+        D[1:] = np.einsum("iab,ib->ia", R[par[1:]], self._t0[1:])
+        Dk = np.zeros((self.model.njoints, 3, K))
+        Dk[np.arange(self.model.njoints), :, self._seg_t] = D
+        P = np.einsum("ji,iak->jak", self._ancestors, Dk)
+        out = P[self.joint].copy()
+        own = np.einsum("mab,mb->ma", R[self.joint], self.points0)
+        out[np.arange(self.n_points), :, self.point_segment] += own
+        return out
+
+    def __repr__(self) -> str:
+        sc = ", ".join(f"{n}={s:.3f}" for n, s in zip(self.segment_names, self.scales, strict=True))
+        return (
+            f"Template(robot={self.robot.name!r}, points={self.n_points}, "
+            f"skinning={self.skinning!r}, scales=({sc}))"
+        )
+
+
+__all__ = ["PosedTemplate", "Template", "segments_of_joints", "skew_batch"]
