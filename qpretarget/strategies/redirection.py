@@ -37,10 +37,17 @@ hand over :math:`v^* = \dot p_r + K e` for the tick only, so the blend is applie
 itself: the error feedback is scaled by :math:`(1 - b)` as the pair closes in, which is the role of
 the decreasing :math:`K'`.
 
-Distances come from coal on the convex hulls of the pair links' collision meshes (primitive
-shapes are used as they are), computed once at bind time. Box bounds are honoured with Poubel's
-clamping loop on the last step (see :mod:`.nullspace`); constraint rows cannot be, and binding
-with rows raises unless ``ignore_rows: true``.
+Geometry is the shared :class:`qpretarget.collision.CollisionModel`, the one the QP's
+``self_collision`` rows use (one convex hull or capsule per link, docs/collisions.md): its
+witness points :math:`p_a, p_b` and unit normal :math:`n` (from :math:`a` to :math:`b`, signed:
+also valid in penetration), with the temporal-coherence broad phase, so only pairs that can be
+within the blending's reach are computed: :math:`b(d) >` ``activation`` iff
+:math:`d < d_c\,(\delta + \ln((1 - \epsilon)/\epsilon)/\alpha)` (8.1 cm with the defaults).
+The collision-point Jacobians :math:`J_a(p_a), J_b(p_b)` (3 x nv, world axes) come from the
+tick's joint Jacobians (``state.data``); their normal projections
+:math:`n^\top(J_b - J_a)` are exactly the shared model's distance gradients. Box bounds are
+honoured with Poubel's clamping loop on the last step (see :mod:`.nullspace`); constraint rows
+cannot be, and binding with rows raises unless ``ignore_rows: true``.
 
 YAML::
 
@@ -50,21 +57,22 @@ YAML::
       critical_distance: 0.05     # d_c [m]
       blend_alpha: 15.0           # alpha of eq. 23 (paper figure: 15)
       blend_delta: 1.0            # delta of eq. 23 (0.5 or 1.0 in the paper)
+      geometry: convex_hull       # or capsule (qpretarget.collision)
 """
 
 from __future__ import annotations
 
 import time
-import warnings
 from collections.abc import Sequence
 from typing import Any
 
-import coal
 import numpy as np
 import pinocchio as pin
 
-from ..errors import ConfigError, UnknownNameError
-from ..robot import LWA, RobotModel
+from ..collision import CollisionModel, link_shapes
+from ..constraints.self_collision import resolve_link
+from ..errors import ConfigError
+from ..robot import LWA, RobotModel, RobotState
 from ..validation import positive_float
 from .base import STRATEGIES, Strategy, StrategyResult, TickProblem
 from .nullspace import clamping_loop, row_constraints_error, weighted_prioritized_dls
@@ -76,85 +84,12 @@ def blending(d: np.ndarray | float, critical_distance: float, alpha: float, delt
     return 0.5 * (1.0 + np.tanh(0.5 * x))  # = e^x / (1 + e^x), without overflow
 
 
-def _to_coal(M: pin.SE3) -> coal.Transform3s:
-    return coal.Transform3s(M.rotation, M.translation)
+def blending_reach(critical_distance: float, alpha: float, delta: float, level: float) -> float:
+    r"""Distance below which :math:`b(d) >` ``level`` (eq. 23 inverted) [m].
 
-
-class PairDistances:
-    """Witness points of link pairs from coal, on convex hulls of the collision meshes.
-
-    Args:
-        robot: the robot (its URDF collision geometry is loaded once).
-        pairs: ``[[link_a, link_b], ...]`` URDF link names.
-        path: YAML path used in error messages.
-
-    Raises:
-        UnknownNameError: a link has no collision geometry (lists the close names).
+    :math:`b(d) > \epsilon \iff d < d_c\,(\delta + \ln((1 - \epsilon)/\epsilon)/\alpha)`.
     """
-
-    def __init__(
-        self, robot: RobotModel, pairs: Sequence[Sequence[str]], *, path: str = ""
-    ) -> None:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # pinocchio warns about package dirs given twice
-            gmodel, _ = robot.geometry()
-        model = robot.model
-        by_link: dict[str, list[int]] = {}
-        for gid, go in enumerate(gmodel.geometryObjects):
-            by_link.setdefault(model.frames[go.parentFrame].name, []).append(gid)
-        self._shapes: dict[int, Any] = {}
-        self.pairs: list[tuple[str, str]] = []
-        self._combos: list[list[tuple[int, int]]] = []
-        for i, pair in enumerate(pairs):
-            if isinstance(pair, str) or len(pair) != 2:
-                raise ConfigError(f"a pair is [link_a, link_b], got {pair!r}.", path=f"{path}[{i}]")
-            for j, link in enumerate(pair):
-                if link not in by_link:
-                    raise UnknownNameError(
-                        "collision link", str(link), sorted(by_link), path=f"{path}[{i}][{j}]",
-                        fix="Links with collision geometry: " + ", ".join(sorted(by_link)) + ".",
-                    )  # fmt: skip
-            a, b = pair
-            self.pairs.append((a, b))
-            self._combos.append([(ga, gb) for ga in by_link[a] for gb in by_link[b]])
-            for gid in by_link[a] + by_link[b]:
-                if gid not in self._shapes:
-                    self._shapes[gid] = self._hull(gmodel.geometryObjects[gid])
-        self._objects = gmodel.geometryObjects
-        self._req = coal.DistanceRequest()
-        self.model = model
-
-    @staticmethod
-    def _hull(go: Any) -> Any:
-        geom = go.geometry
-        if isinstance(geom, coal.BVHModelBase):
-            pts = coal.StdVec_Vec3s()
-            pts.extend(list(np.asarray(geom.vertices())))
-            return coal.Convex.convexHull(pts, False, "Qt")
-        return geom
-
-    def compute(self, data: pin.Data) -> list[tuple[float, np.ndarray, np.ndarray, int, int]]:
-        """Per pair: ``(d, p_a, p_b, joint_a, joint_b, normal)``, world frame, closest combination.
-
-        ``normal`` is coal's unit normal from ``a`` to ``b`` (used when ``d`` is ~0 or negative).
-        """
-        out = []
-        for combos in self._combos:
-            best = None
-            for ga, gb in combos:
-                oa, ob = self._objects[ga], self._objects[gb]
-                Ma = data.oMi[oa.parentJoint] * oa.placement
-                Mb = data.oMi[ob.parentJoint] * ob.placement
-                res = coal.DistanceResult()
-                d = coal.distance(
-                    self._shapes[ga], _to_coal(Ma), self._shapes[gb], _to_coal(Mb), self._req, res
-                )
-                if best is None or d < best[0]:
-                    pa = np.array(res.getNearestPoint1())
-                    pb = np.array(res.getNearestPoint2())
-                    best = (float(d), pa, pb, oa.parentJoint, ob.parentJoint, np.array(res.normal))
-            out.append(best)
-        return out
+    return critical_distance * (delta + np.log((1.0 - level) / level) / alpha)
 
 
 @STRATEGIES.register("redirection")
@@ -162,7 +97,8 @@ class Redirection(Strategy):
     r"""Closed-form tracking with self-collision redirection and blending (Dariush 2009 eq. 17-23).
 
     Args:
-        pairs: checked link pairs ``[[link_a, link_b], ...]`` (URDF link names).
+        pairs: checked link pairs ``[[link_a, link_b], ...]`` (URDF links with collision
+            geometry; key-point names such as ``right_hand`` resolve to their link).
         critical_distance: :math:`d_c` [m], thickness of the critical zone (eq. 17).
         blend_alpha: :math:`\alpha` of the blending function (eq. 23).
         blend_delta: :math:`\delta` of the blending function (eq. 23).
@@ -175,7 +111,8 @@ class Redirection(Strategy):
             task augmentation to control both critical points"); 0 is eq. 21 as printed.
         clamping: Poubel's clamping loop for the box bounds on the last step.
         ignore_rows: run even if the config has constraint rows (they are ignored).
-        activation: pairs with :math:`b(d)` below this are not redirected.
+        activation: pairs with :math:`b(d)` below this are not redirected (nor computed).
+        geometry: ``convex_hull`` or ``capsule`` link shapes (:mod:`qpretarget.collision`).
     """
 
     def __init__(
@@ -191,6 +128,7 @@ class Redirection(Strategy):
         clamping: bool = True,
         ignore_rows: bool = False,
         activation: float = 1e-4,
+        geometry: str = "convex_hull",
     ) -> None:
         if isinstance(pairs, str) or not isinstance(pairs, Sequence) or not pairs:
             raise ConfigError(f"pairs must be a non-empty list of [link_a, link_b], got {pairs!r}.")
@@ -206,7 +144,11 @@ class Redirection(Strategy):
         self.clamping = bool(clamping)
         self.ignore_rows = bool(ignore_rows)
         self.activation = positive_float(activation, "activation")
-        #: Distances of the pairs at the start of the last tick [m], and its blending weight.
+        if self.activation >= 0.5:
+            raise ConfigError(f"activation must be in (0, 0.5), got {activation!r}.")
+        self.geometry = geometry
+        #: Distances of the pairs at the start of the last tick [m] (exact below the blending's
+        #: reach, :func:`blending_reach`; lower bounds beyond), and its blending weight.
         self.last_distances = np.zeros(0)
         self.last_blend = 0.0
 
@@ -214,17 +156,61 @@ class Redirection(Strategy):
         super().bind(robot, task_dims, n_rows, solver_factory)
         if n_rows and not self.ignore_rows:
             raise row_constraints_error(self.type_name, n_rows)
-        self.distances = PairDistances(robot, self.pair_spec, path="strategy.pairs")
+        shapes = link_shapes(robot, self.geometry)
+        pairs = []
+        for k, pair in enumerate(self.pair_spec):
+            if isinstance(pair, str) or len(pair) != 2:
+                raise ConfigError(
+                    f"a pair is [link_a, link_b], got {pair!r}.", path=f"strategy.pairs[{k}]"
+                )
+            pairs.append(
+                tuple(
+                    resolve_link(robot, shapes, str(x), f"strategy.pairs[{k}][{i}]")
+                    for i, x in enumerate(pair)
+                )
+            )
+        #: The shared collision model (docs/collisions.md), only the pairs of ``pairs``.
+        self.collision = CollisionModel(robot, pairs, geometry=self.geometry, path="strategy.pairs")
+        cm = self.collision
+        joint = {b: sh.joint for b, sh in zip(cm.bodies, cm.shapes, strict=True)}
+        self._joints = np.array([[joint[a], joint[b]] for a, b in cm.pairs])  # bodies' joints
+        self.reach = blending_reach(
+            self.critical_distance, self.blend_alpha, self.blend_delta, self.activation
+        )
         m = sum(d for _, d, _ in task_dims)
         self._J = np.zeros((m, robot.nv))
         self._r = np.zeros(m)
-        self.last_distances = np.full(len(self.distances.pairs), np.inf)
+        self.last_distances = np.full(self.collision.n_pairs, np.inf)
 
-    def _point_jacobian(self, data: pin.Data, joint: int, p: np.ndarray) -> np.ndarray:
-        """(3, nv) world Jacobian of the point ``p`` fixed to ``joint``."""
-        Jj = pin.getJointJacobian(self.robot.model, data, joint, LWA)
-        r = p - data.oMi[joint].translation
-        return Jj[:3] - np.cross(r, Jj[3:].T).T  # v_p = v_o + w x r = v_o - r x w
+    def reset(self) -> None:
+        super().reset()
+        if hasattr(self, "collision"):
+            self.collision.invalidate()
+
+    def collision_points(
+        self, state: RobotState
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        r"""The pairs within the blending's reach and their collision points (eq. 17-19).
+
+        Returns:
+            ``(pairs (k,), d (k,), p_a (k, 3), p_b (k, 3), n (k, 3), J_c (2k, 3, nv))``: pair
+            indices, distances, witness points, unit normals from :math:`a` to :math:`b` (from
+            the shared :class:`CollisionModel`), and the world Jacobians of the points
+            :math:`J_a(p_a)` (even rows) and :math:`J_b(p_b)` (odd rows):
+            :math:`\dot p = J_o v + \omega \times (p - o)` of the body's joint.
+        """
+        cm = self.collision
+        cm.update(state, self.reach)
+        act = cm.active
+        pa, pb = cm.witness_a, cm.witness_b
+        data, model = state.data, self.robot.model
+        Jc = np.empty((2 * act.size, 3, self.nv))
+        for x in range(2 * act.size):  # the k active pairs' 2k points (few; not per joint)
+            j = int(self._joints[act[x // 2], x % 2])
+            Jj = pin.getJointJacobian(model, data, j, LWA)
+            r = (pb if x % 2 else pa)[x // 2] - data.oMi[j].translation
+            Jc[x] = Jj[:3] - np.cross(r, Jj[3:].T).T  # v_p = v_o + w x r = v_o - r x w
+        return act, cm.distances[act].copy(), pa, pb, cm.normals, Jc
 
     def solve(self, tp: TickProblem) -> StrategyResult:
         t0 = time.perf_counter()
@@ -240,28 +226,23 @@ class Redirection(Strategy):
         W = None if np.array_equal(tp.W, np.eye(self.nv)) else tp.W
         try:
             q0 = weighted_prioritized_dls([J], [r], [lam], W)  # eq. 9
-            data = tp.state.data
-            pairs = self.distances.compute(data)
-            d = np.array([p[0] for p in pairs])
-            self.last_distances = d
+            _, d, _, _, n, Jp = self.collision_points(tp.state)
+            self.last_distances = self.collision.distances.copy()
             bj = blending(d, self.critical_distance, self.blend_alpha, self.blend_delta)
             active = np.flatnonzero(bj > self.activation)
             b = float(bj[active].max()) if active.size else 0.0
             self.last_blend = b
             r_blend = r
             if active.size:
-                rows, vel = [], []
-                for j in active:
-                    dist, pa, pb, ja, jb, normal = pairs[j]
-                    n = (pb - pa) / dist if dist > 1e-9 else normal  # eq. 17's unit normal
-                    for joint, p, nn in ((ja, pa, n), (jb, pb, -n)):
-                        Jp = self._point_jacobian(data, joint, p)
-                        pdot = Jp @ q0
-                        pdot_r = pdot - max(float(pdot @ nn), 0.0) * nn  # eq. 18
-                        rows.append(Jp)
-                        vel.append(pdot_r)
-                Jc = np.vstack(rows)
-                pc = np.concatenate(vel)
+                # Points a, b of each active pair; eq. 17's unit normals n_a = n, n_b = -n.
+                pts = np.stack([2 * active, 2 * active + 1], axis=1).reshape(-1)
+                N = np.repeat(n[active], 2, axis=0)
+                N[1::2] *= -1.0
+                Jp = Jp[pts]
+                pdot = Jp @ q0  # (2k, 3) collision-point velocities of the tracking solution
+                approach = np.maximum(np.einsum("ij,ij->i", pdot, N), 0.0)
+                pc = (pdot - approach[:, None] * N).reshape(-1)  # eq. 18 (approach removed)
+                Jc = Jp.reshape(-1, self.nv)
                 S = ~np.any(np.abs(Jc) > 1e-12, axis=0)  # joints not moving any collision point
                 qr = weighted_prioritized_dls([Jc], [pc], [self.point_damping], W)  # eq. 19
                 qr[S] += q0[S]  # eq. 19, second term S J^* (p_r + K e)

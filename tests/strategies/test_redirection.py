@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from qpretarget import Controller, load_robot
+from qpretarget.collision import CollisionModel
 from qpretarget.errors import UnknownNameError
 from qpretarget.strategies.nullspace import weighted_prioritized_dls
-from qpretarget.strategies.redirection import PairDistances, blending
+from qpretarget.strategies.redirection import blending, blending_reach
 
 PAIRS = [
     ["right_wrist_yaw_link", "torso_link"],
@@ -33,6 +34,9 @@ def test_blending_function_eq_23() -> None:
     assert blending(2 * dc, dc, 15.0, 0.5) < 1e-9
     d = np.linspace(0, 3 * dc, 50)
     assert np.all(np.diff(blending(d, dc, 15.0, 1.0)) < 0)
+    # The reach (pairs computed at all) inverts eq. 23: b = level there, to round-off.
+    reach = blending_reach(dc, 15.0, 1.0, 1e-4)
+    assert blending(reach, dc, 15.0, 1.0) == pytest.approx(1e-4, rel=1e-9)
 
 
 def reach_config(g1, strategy):
@@ -58,7 +62,7 @@ def reach_config(g1, strategy):
 @pytest.fixture(scope="module")
 def runs(g1):
     """Right hand driven into the torso, with redirection and with plain DLS (same lambda)."""
-    dist = PairDistances(g1, PAIRS)
+    dist = CollisionModel(g1, [tuple(p) for p in PAIRS], broad_phase=False)
     out = {}
     for name, strategy in [
         ("redirection", {"type": "redirection", "pairs": PAIRS}),
@@ -74,7 +78,7 @@ def runs(g1):
             a = min(1.0, k / 100)
             res = ctrl.step({"right_hand": (1 - a) * p0 + a * goal})
             statuses.append(res.solver_status)
-            ds.append(min(p[0] for p in dist.compute(ctrl.state.data)))
+            ds.append(dist.compute_all(ctrl.state)[0].min())
         out[name] = (np.array(ds), statuses, ctrl)
     return out
 
@@ -94,7 +98,8 @@ def test_redirection_slows_the_approach(runs) -> None:
     ds_plain, _, _ = runs["plain"]
     assert ctrl.strategy.last_blend > 0.5  # redirection is engaged by the end
     # Once blending engages the pairs close in more slowly than with plain DLS tracking
-    # (measured: 0.038 m vs 0.030 m at tick 60; asserted with 4 mm of margin).
+    # (measured with the shared link hulls: 0.035 m vs 0.018 m at tick 60; asserted with 4 mm
+    # of margin).
     assert ds[60] > ds_plain[60] + 0.004
     assert np.all(ds[40:70] >= ds_plain[40:70] - 1e-6)
 
@@ -115,3 +120,28 @@ def test_same_tick_matches_weighted_dls_when_inactive(g1) -> None:
 def test_unknown_link_lists_close_names(g1) -> None:
     with pytest.raises(UnknownNameError, match="right_wrist_yaw_link"):
         reach_config(g1, {"type": "redirection", "pairs": [["right_wrist_yaw", "torso_link"]]})
+
+
+def test_collision_points_are_the_shared_models(g1) -> None:
+    """Witness points from the shared CollisionModel; point Jacobians match its gradients."""
+    ctrl = reach_config(g1, {"type": "redirection", "pairs": PAIRS, "critical_distance": 0.5})
+    ctrl.reset()
+    ctrl.step({})
+    strat = ctrl.strategy
+    pairs, d, pa, pb, n, Jc = strat.collision_points(ctrl.state)
+    assert pairs.size == len(PAIRS)  # d_c = 0.5 m: every pair is within the blending's reach
+    ref = CollisionModel(g1, [tuple(p) for p in PAIRS], broad_phase=False)
+    d_ref, pa_ref, pb_ref, _ = ref.compute_all(ctrl.state)
+    # Same geometry and GJK: identical numbers (1e-12 m: round-off only).
+    assert np.allclose(d, d_ref, atol=1e-12) and np.allclose(pa, pa_ref, atol=1e-12)
+    assert np.allclose(pb - pa, d[:, None] * n, atol=1e-9)  # p_b = p_a + d n
+    # n^T (J_b(p_b) - J_a(p_a)) is the distance gradient the QP's self_collision rows use
+    # (collision.py); equal to round-off (1e-9 on entries of order 1).
+    grad = np.einsum("ki,kij->kj", n, Jc[1::2] - Jc[0::2])
+    assert np.allclose(grad, strat.collision.gradients(ctrl.state), atol=1e-9)
+
+
+def test_key_point_names_resolve_to_links(g1) -> None:
+    ctrl = reach_config(g1, {"type": "redirection", "pairs": [["right_hand", "torso_link"]]})
+    assert ctrl.strategy.collision.pairs[0][1] == "torso_link"
+    assert ctrl.strategy.collision.pairs[0][0] in {p[0] for p in PAIRS}
