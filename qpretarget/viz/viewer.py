@@ -176,7 +176,7 @@ class Viewer:
                 human = place_beside(pts, base, yaw)
         series = series or {}
         with gui.add_folder("Timeline"):
-            slider = gui.add_slider("Time [s]", min=0, max=max(T - 1, 1), step=1, initial_value=0)
+            slider = gui.add_slider("Frame", min=0, max=max(T - 1, 1), step=1, initial_value=0)
             play = gui.add_button("Play / pause")
             speed = gui.add_dropdown("Speed", ("0.25x", "0.5x", "1x", "2x"), initial_value="1x")
         numbers = gui.add_markdown("")
@@ -281,16 +281,45 @@ class Viewer:
                 f"/keypoints/{key}", axes_length=0.08, axes_radius=0.004,
                 position=M.translation, wxyz=_wxyz(M.rotation),
             )  # fmt: skip
-        lines = [f"**{robot.name}** nq={robot.nq} nv={robot.nv}", ""]
-        lines += [f"- task `{n}`: {t!r}" for n, t in controller.tasks.items()]
+        lines = [f"**{robot.name}** nq={robot.nq} nv={robot.nv}", "", "**tasks**", ""]
+        lines += [f"- `{n}` ({t.type_name})" for n, t in controller.tasks.items()]
+        lines += ["", "**constraints**", ""]
         for c in controller.constraints:
-            lines.append(f"- constraint `{c.name}`")
-            show = getattr(c, "show_in_viewer", None)
-            if show is not None:
-                show(self.server.scene, controller.state)
-            for line in getattr(c, "describe", lambda: [])()[:25]:
+            lines.append(f"- `{c.name}` ({c.type_name})")
+            cmodel = getattr(c, "model", None)
+            if cmodel is not None and hasattr(cmodel, "shapes") and hasattr(cmodel, "pairs"):
+                self._show_collision_model(c.name, cmodel)
+            for line in getattr(c, "describe", lambda: [])()[:12]:
                 lines.append(f"    - {line}")
-        self.server.gui.add_markdown("\n".join(lines))
+        with self.server.gui.add_folder("Setup"):
+            self.server.gui.add_markdown("\n".join(lines))
+
+    def _show_collision_model(self, name: str, cmodel: Any) -> None:
+        """Draw a collision model's shapes (translucent) and its pairs (lines between centres)."""
+        from scipy.spatial import ConvexHull
+
+        from ..collision import primitive_points
+
+        data = self.data
+        centres = {}
+        for k, shape in enumerate(cmodel.shapes):
+            try:
+                pts = primitive_points(shape.geometry)
+                hull = ConvexHull(pts)
+            except Exception:  # a shape we cannot draw is skipped, the rest still shows
+                continue
+            M = (data.oMi[shape.joint] if shape.joint else pin.SE3.Identity()) * shape.placement
+            self.server.scene.add_mesh_simple(
+                f"/{name}/shape_{k}", pts.astype(np.float32), hull.simplices.astype(np.uint32),
+                color=(240, 120, 60), opacity=0.35, position=M.translation,
+                wxyz=_wxyz(M.rotation),
+            )  # fmt: skip
+            centres[shape.name] = M.act(pts.mean(axis=0))
+        segs = [(centres[a], centres[b]) for a, b in cmodel.pairs if a in centres and b in centres]
+        if segs:
+            self.server.scene.add_line_segments(
+                f"/{name}/pairs", np.array(segs, dtype=np.float32), (200, 40, 40), thickness=0.004
+            )
 
     # ------------------------------------------------------------------ live
     def serve_forever(self) -> None:

@@ -7,15 +7,14 @@ installs. A missing piece is a test failure, not a skip: the issue asks CI to in
 
 from __future__ import annotations
 
-import shutil
 import socket
-import time
 
 import numpy as np
 import pytest
 
 from qpretarget.controller import Controller
 from qpretarget.solver_comparison import record_run, scripted_targets
+from qpretarget.viz.screenshot import screenshot
 from qpretarget.viz.viewer import ViewerError, choose_port
 
 
@@ -28,47 +27,18 @@ def short_run(configs_dir, tmp_path_factory):
     return path
 
 
-def _chrome():
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-    driver_path = shutil.which("chromedriver")
-    assert chromium and driver_path, "install Debian's chromium and chromium-driver (see .ci/run)"
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = chromium
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--use-gl=angle",
-              "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-              "--disable-background-networking", "--disable-component-update", "--disable-sync",
-              "--no-first-run", "--window-size=1000,700"):  # fmt: skip
-        opts.add_argument(a)
-    return webdriver.Chrome(service=Service(driver_path), options=opts)
-
-
 def test_viewer_draws_robot_and_timeline(short_run, tmp_path) -> None:
     from PIL import Image
 
     from qpretarget.commands.view import build_viewer
 
     viewer = build_viewer(short_run, host="127.0.0.1", port=0)
-    driver = _chrome()
+    shot = tmp_path / "view.png"
     try:
-        driver.get(viewer.url)
-        deadline = time.time() + 90
-        found = False
-        while time.time() < deadline:
-            src = driver.page_source
-            if "Time [s]" in src and "Play / pause" in src:
-                found = True
-                break
-            time.sleep(1.0)
-        assert found, "the timeline controls never appeared"
-        time.sleep(3.0)  # let the meshes arrive and draw
-        shot = tmp_path / "view.png"
-        driver.save_screenshot(str(shot))
+        found = screenshot(viewer.url, shot, wait_for=("Frame", "Play / pause"))
     finally:
-        driver.quit()
         viewer.close()
+    assert found, "the timeline controls never appeared"
     img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
     h, w, _ = img.shape
     # The robot stands at the origin, which the initial camera puts in the left-centre of the page
