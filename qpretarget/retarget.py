@@ -509,9 +509,10 @@ def whole_body_config(
     Poubel 2014 Table I need is added when missing: a CoM task (x, y), a pose task on each sole,
     and the ``retarget:`` section (its ``support:`` included). In both cases the knees are kept
     0.2 rad from straight (the straight-knee singularity stalls a velocity-level controller
-    holding a foot on the ground), and a config without ``acceleration_limits`` gets a damping
-    of at least 0.3 (with 1e-3 and no acceleration limit, G1's wrists chatter at their velocity
-    limits around singular configurations when a hand target is slightly out of reach).
+    holding a foot on the ground), and the damping is at least 0.3: with 1e-3 and full-error
+    gains the closed loop is ill-conditioned near G1's wrist and knee singularities (without
+    acceleration limits the wrists chatter at their velocity limits; with them, a 1e-16 change
+    of the inputs grows to 1e-5..0.2 rad within a second, so runs are not reproducible).
 
     Args:
         robot: Bundled robot with two feet and key-point frames (g1, talos, romeo, icub).
@@ -614,13 +615,9 @@ def whole_body_config(
             merged.setdefault(joint, bounds)
         spec["position_limits"] = merged
         cfg["robot"] = spec
-    constraints = cfg.get("constraints") or []
-    if not any(
-        isinstance(c, Mapping) and c.get("type") == "acceleration_limits" for c in constraints
-    ):
-        reg = dict(cfg.get("regularization") or {"type": "identity"})
-        reg["damping"] = max(float(reg.get("damping", 0.0)), 0.3)
-        cfg["regularization"] = reg
+    reg = dict(cfg.get("regularization") or {"type": "identity"})
+    reg["damping"] = max(float(reg.get("damping", 0.0)), 0.3)
+    cfg["regularization"] = reg
     cfg_tasks = list(cfg.get("tasks") or [])
     names = {t.get("name") for t in cfg_tasks}
     frames = {t.get("frame") for t in cfg_tasks if t.get("type") == "frame"}
