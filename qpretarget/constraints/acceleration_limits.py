@@ -101,6 +101,7 @@ class AccelerationLimits(Constraint):
         self._a = a[limited]
         self._qmin = robot.q_min[self._qi]  # may be -inf: no braking on that side
         self._qmax = robot.q_max[self._qi]
+        self._dist = np.zeros((2, len(self._qi)))
         self._set_gamma(1.0)
         self._v_prev = np.zeros(robot.nv)
         self._lb = np.full(robot.nv, -np.inf)
@@ -124,10 +125,18 @@ class AccelerationLimits(Constraint):
         self._k0 = -c / gamma - 0.5 * c * (c - 1.0)
 
     def _nu_max(self, delta: np.ndarray) -> np.ndarray:
-        """Normalized braking bound (module docstring); 0 at or beyond the limit."""
-        delta = np.maximum(delta, 0.0)  # -inf limits give +inf: no bound
-        sq = np.sqrt(0.25 + 2.0 * np.maximum(delta - self._k0, 0.0)) - 0.5
-        return np.where(delta <= self._delta_lin, self._gamma * delta, sq)
+        """Normalized braking bound (module docstring), in place on ``delta``; 0 at the limit."""
+        np.maximum(delta, 0.0, out=delta)  # beyond the limit: 0 (joint_limits pulls back)
+        lin = delta <= self._delta_lin
+        lin_val = self._gamma * delta
+        delta -= self._k0
+        np.maximum(delta, 0.0, out=delta)
+        delta *= 2.0
+        delta += 0.25
+        np.sqrt(delta, out=delta)
+        delta -= 0.5
+        np.copyto(delta, lin_val, where=lin)
+        return delta
 
     def reset(self, state: RobotState) -> None:
         self._v_prev[...] = 0.0
@@ -143,17 +152,19 @@ class AccelerationLimits(Constraint):
         return out
 
     def compute_bounds(self, state: RobotState, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        a = self._a
-        dv = a * dt
+        dv = self._a * dt  # (n,)
         vp = self._v_prev[self._vi]
         lo, hi = vp - dv, vp + dv
         if self.braking:
             q = state.q[self._qi]
-            scale = 1.0 / (dt * dv)  # distances in units of a_max dt^2
-            up = dv * self._nu_max((self._qmax - q) * scale)
-            down = dv * self._nu_max((q - self._qmin) * scale)
-            hi = np.minimum(hi, np.maximum(up, lo))
-            lo = np.maximum(lo, np.minimum(-down, hi))
+            d = self._dist  # (2, n): distances to the upper and lower limits
+            np.subtract(self._qmax, q, out=d[0])
+            np.subtract(q, self._qmin, out=d[1])
+            d *= 1.0 / (dt * dt * self._a)  # in units of a_max dt^2 (inf for unlimited joints)
+            nu = self._nu_max(d)
+            nu *= dv
+            np.minimum(hi, np.maximum(nu[0], lo), out=hi)
+            np.maximum(lo, np.minimum(-nu[1], hi), out=lo)
         self._lb[self._vi] = lo
         self._ub[self._vi] = hi
         return self._lb, self._ub

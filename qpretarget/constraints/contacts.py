@@ -55,7 +55,9 @@ def velocity_kinematics(state: RobotState) -> pin.Data:
 
     The second-order drift terms of ``contacts`` and ``support_polygon`` read the frames'
     classical accelerations :math:`\dot J v` (and the CoM's) from it; one pass serves both, and
-    it is recomputed only when ``state.q`` or ``state.v`` changed. ``state.data`` is not touched.
+    it is recomputed only when ``state.q`` or ``state.v`` is a new array (``RobotState.update``
+    installs new ones every tick; arrays modified in place are not detected). ``state.data`` is
+    not touched.
 
     Returns:
         A pinocchio ``Data`` owned by the cache (do not keep it across ticks).
@@ -65,9 +67,11 @@ def velocity_kinematics(state: RobotState) -> pin.Data:
         entry = [state.model.createData(), None, None, np.zeros(state.model.nv)]
         _VELOCITY_KINEMATICS[state] = entry
     data, q, v, zero = entry
-    if q is None or not (np.array_equal(q, state.q) and np.array_equal(v, state.v)):
+    # RobotState.update installs new q and v arrays every tick: identity is the cheap test (the
+    # cache holds references, so an id cannot be reused while cached).
+    if q is not state.q or v is not state.v:
         pin.forwardKinematics(state.model, data, state.q, state.v, zero)
-        entry[1], entry[2] = state.q.copy(), state.v.copy()
+        entry[1], entry[2] = state.q, state.v
     return data
 
 
@@ -214,7 +218,6 @@ class Contacts(Constraint):
         self._anchor_p = np.zeros((n, 3))
         self._anchor_R = np.tile(np.eye(3), (n, 1, 1))
         self._C = np.zeros((self.n_rows, robot.nv))
-        self._b = np.zeros(self.n_rows)
         self._l = np.full(self.n_rows, -np.inf)
         self._u = np.full(self.n_rows, np.inf)
 
@@ -338,35 +341,40 @@ class Contacts(Constraint):
 
     def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
         k = 1.0 / dt if self.gain is None else min(self.gain, 1.0 / dt)
-        C, b, lo, hi = self._C, self._b, self._l, self._u
-        drift = self.second_order and bool(self._active.any()) and bool(np.any(state.v))
+        C, lo, hi = self._C, self._l, self._u
+        active = self._active.tolist()
+        drift = self.second_order and any(active) and bool(state.v.any())
         if drift:
             model = state.model
             data2 = velocity_kinematics(state)
+            half_dt = 0.5 * dt
+        cap_lin2, cap_ang2 = self.max_correction[0] ** 2, self.max_correction[1] ** 2
         for i, fid in enumerate(self.frame_ids):
-            rows = slice(6 * i, 6 * i + 6)
-            if not self._active[i]:
-                C[rows] = 0.0
-                lo[rows] = -np.inf
-                hi[rows] = np.inf
+            r0 = 6 * i
+            if not active[i]:
+                C[r0 : r0 + 6] = 0.0
+                lo[r0 : r0 + 6] = -np.inf
+                hi[r0 : r0 + 6] = np.inf
                 continue
             M = state.frame_placement(fid)
             R = M.rotation
-            C[rows] = state.frame_jacobian(fid)
+            C[r0 : r0 + 6] = state.frame_jacobian(fid)
             lin = k * (self._anchor_p[i] - M.translation)
-            ang = k * (R @ pin.log3(R.T @ self._anchor_R[i]))
-            n_lin, n_ang = np.linalg.norm(lin), np.linalg.norm(ang)
-            if n_lin > self.max_correction[0]:
-                lin *= self.max_correction[0] / n_lin
-            if n_ang > self.max_correction[1]:
-                ang *= self.max_correction[1] / n_ang
-            b[6 * i : 6 * i + 3] = lin
-            b[6 * i + 3 : 6 * i + 6] = ang
+            ang = R @ pin.log3(R.T @ self._anchor_R[i])
+            ang *= k
+            n2 = lin.dot(lin)
+            if n2 > cap_lin2:
+                lin *= self.max_correction[0] / np.sqrt(n2)
+            n2 = ang.dot(ang)
+            if n2 > cap_ang2:
+                ang *= self.max_correction[1] / np.sqrt(n2)
+            lo[r0 : r0 + 3] = lin
+            lo[r0 + 3 : r0 + 6] = ang
             if drift:
-                acc = pin.getFrameClassicalAcceleration(model, data2, fid, LWA)
-                b[rows] -= (0.5 * dt) * acc.vector
-            lo[rows] = b[rows]
-            hi[rows] = b[rows]
+                acc = pin.getFrameClassicalAcceleration(model, data2, fid, LWA).vector
+                acc *= half_dt
+                lo[r0 : r0 + 6] -= acc
+            hi[r0 : r0 + 6] = lo[r0 : r0 + 6]
         return ConstraintBlock(self.name, C, lo, hi)
 
     def __repr__(self) -> str:

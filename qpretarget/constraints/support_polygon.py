@@ -219,6 +219,8 @@ class SupportPolygon(Constraint):
             self._seen_version = self.contacts.version
         if len(self.vertices) < 3:  # no support (flight phase): no row
             self.normals, self.offsets = np.zeros((0, 2)), np.zeros(0)
+            self._C[...] = 0.0
+            self._u[...] = np.inf
             return
         normals, offsets = polygon_halfplanes(self.vertices, 0.0)
         if len(normals) > self.n_rows:
@@ -246,6 +248,8 @@ class SupportPolygon(Constraint):
         self._N[:k] = normals
         self._o[:k] = offsets
         self._n_edges = k
+        self._C[k:] = 0.0  # unused rows stay inactive until the next polygon
+        self._u[k:] = np.inf
 
     def reset(self, state: RobotState) -> None:
         self._seen_version = -1
@@ -284,12 +288,10 @@ class SupportPolygon(Constraint):
             # time instead of approaching the edge asymptotically from outside.
             d[d < 0.0] -= self.recovery_depth
             self._u[:k] = (self.gain / dt) * d
-            if self.second_order and np.any(state.v):
+            if self.second_order and state.v.any():
                 data2 = velocity_kinematics(state)
                 pin.centerOfMass(state.model, data2, pin.KinematicLevel.ACCELERATION, False)
                 self._u[:k] -= (0.5 * dt) * (self._N[:k] @ data2.acom[0][:2])
-        self._C[k:] = 0.0
-        self._u[k:] = np.inf
         return ConstraintBlock(self.name, self._C, self._l, self._u)
 
     def __repr__(self) -> str:
