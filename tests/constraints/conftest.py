@@ -52,8 +52,14 @@ def whole_body_config(
     margin: float = 0.01,
     gain: float | None = 15.0,
     com: bool = False,
+    damping: float = 0.3,
 ) -> dict[str, Any]:
-    """G1 whole-body controller: g1_augmentation's tasks plus contacts, polygon, acc. limits."""
+    """G1 whole-body controller: g1_augmentation's tasks plus contacts, polygon, acc. limits.
+
+    Damping 0.3 (lambda of the damped least squares): at 1e-3 the closed loop is chaotic under
+    jumping targets (1e-16 input differences grow to visible ones within a second), which makes
+    worst-case numbers depend on rounding.
+    """
     constraints: list[dict[str, Any]] = [
         {"type": "joint_limits", "gain": 0.95},
         {"type": "velocity_limits"},
@@ -67,7 +73,7 @@ def whole_body_config(
         "robot": robot,
         "dt": 0.01,
         "strategy": {"type": "augmentation"},
-        "regularization": {"type": "identity", "damping": 1.0e-3},
+        "regularization": {"type": "identity", "damping": damping},
         "solver": {"name": "proxsuite", "eps_abs": 1.0e-9},
         "tasks": g1_tasks(gain, com=com),
         "constraints": constraints,

@@ -181,11 +181,12 @@ def test_feet_stay_planted_under_wild_targets(g1, make_config, make_wild_targets
     +-0.4 m, pelvis +-0.15 m and +-0.4 rad) in double support; every tick each sole stays within
     1 mm and 0.5 degree of its anchor (measured on the integrated configuration).
 
-    Whole-body config: tasks with gain 15/s, joint/velocity/acceleration (100 rad/s^2) limits,
-    support polygon. The contact rows are linear with the second-order drift anticipated, so what
-    remains is the tick's higher-order integration error (measured worst 0.55-0.60 mm over three
-    seeds, 0.1 degree; a tick where the acceleration bound must give to keep the feet makes a
-    velocity jump, and with gain 20/s such ticks reached 1.3 mm).
+    Whole-body config: tasks with gain 15/s, damping 0.3, joint/velocity/acceleration
+    (100 rad/s^2) limits, support polygon. The contact rows are linear with the second-order drift
+    anticipated, so what remains is the tick's higher-order integration error (measured worst
+    0.50-0.57 mm over three seeds, 0.1 degree; a tick where the acceleration bound must give to
+    keep the feet makes a velocity jump, and with gain 20/s and damping 1e-3 such ticks reached
+    1.3 mm).
     """
     ctrl = _ctrl(g1, make_config)
     con = ctrl.constraint("contacts")
@@ -208,7 +209,7 @@ def test_second_order_term_is_what_keeps_fast_motions_planted(
     g1, make_config, make_wild_targets
 ) -> None:
     """The same wild targets for 300 ticks with ``second_order: false`` drift about three times
-    more (measured 1.31 mm vs 0.44 mm): the drift anticipation is what holds the 1 mm."""
+    more (measured 1.13 mm vs 0.34 mm): the drift anticipation is what holds the 1 mm."""
     worst = {}
     for second_order in (False, True):
         cfg = make_config(g1)

@@ -163,10 +163,11 @@ def _balance_run(
 @pytest.mark.parametrize("single", [False, True], ids=["double", "single"])
 def test_balance_com_stays_in_the_shrunk_polygon(g1, make_config, polygon_margin, single) -> None:
     """Acceptance "Balance": targets 0.3 m sideways; the CoM projection stays inside the polygon
-    shrunk by the margin, to 1e-4 m (the rows are linearized: the CoM hovers at the edge within
-    the second-order error of a tick, measured 2e-7 m in double and 3.4e-5 m in single support),
-    and the same run without the constraint leaves it by centimetres (measured 1.7 cm and 8.3 cm):
-    the constraint holds it, at the cost of the CoM tracking error (16 vs 15 cm, 26 vs 19 cm)."""
+    shrunk by the margin, to 1e-4 m (the rows are linearized: the CoM could pass an edge by one
+    tick's third-order error; measured 1.3e-9 m in double support and never outside in single
+    support), and the same run without the constraint leaves it by centimetres (measured 1.6 cm
+    and 8.4 cm): the constraint holds it, at the cost of the CoM tracking error (16 vs 15 cm,
+    26 vs 18 cm)."""
     inside, err_with = _balance_run(g1, make_config, polygon_margin, polygon=True, single=single)
     outside, err_without = _balance_run(
         g1, make_config, polygon_margin, polygon=False, single=single
