@@ -342,6 +342,9 @@ class Controller:
             con.reset(self.state)
         self.regularization.reset(self.state)
         self.strategy.reset()
+        fb_solver = getattr(self.fallback, "solver", None)
+        if fb_solver is not None:  # runs from reset() must be reproducible to the last bit
+            fb_solver.reset()
         if self._level_impl is not None:
             self._level_impl.reset()
         out = q.copy()
