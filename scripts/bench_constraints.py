@@ -2,10 +2,11 @@
 """Time the whole-body constraint modules per tick on G1 (contacts, support polygon,
 acceleration limits) and the relaxation fallback.
 
-Runs the G1 whole-body controller (g1_augmentation's tasks with gain 15/s, joint, velocity and
-acceleration limits, contacts, support polygon) on targets that jump 4 times a second, wraps
-each constraint's ``compute_rows`` / ``compute_bounds`` and the fallback with timers, and prints
-median / p95 microseconds per call, plus the step time with and without the three modules.
+Runs the G1 whole-body controller (g1_augmentation's tasks with gain 15/s, damping 0.3, joint,
+velocity and acceleration limits, contacts, support polygon) on targets that jump 4 times a
+second, wraps each constraint's ``compute_rows`` / ``compute_bounds`` and the fallback with
+timers, and prints median / p95 microseconds per call, plus the step time with and without the
+three modules and a load calibration (one ``computeJointJacobians`` pass, ~4 us idle).
 
     python scripts/bench_constraints.py [--ticks 600]
 """
@@ -57,7 +58,7 @@ def config(robot: Any, whole_body: bool) -> dict[str, Any]:
     return {
         "robot": robot,
         "dt": 0.01,
-        "regularization": {"type": "identity", "damping": 1e-3},
+        "regularization": {"type": "identity", "damping": 0.3},
         "solver": {"name": "proxsuite", "eps_abs": 1e-9},
         "tasks": tasks,
         "constraints": cons,
