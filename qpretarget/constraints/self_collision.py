@@ -386,7 +386,8 @@ class SelfCollision(DistanceDamper):
             collision geometry).
         exclude: pairs removed from the list (``auto`` or explicit).
         touch_distance: ``auto`` only: pairs closer than this in the reference posture are left
-            out as touching [m].
+            out as touching [m]; pairs closer than ``d_s`` (but not touching) keep half their
+            rest distance as safety distance.
         use_srdf: ``auto`` only: leave out the pairs the robot's SRDF disables.
         max_rows: number of QP rows; the closest active pairs get them. Default: one row per
             pair for a listed pair set, :data:`AUTO_MAX_ROWS` for ``auto`` (hundreds of pairs).
@@ -508,13 +509,28 @@ class SelfCollision(DistanceDamper):
         # Distances in the reference posture (reported by describe()).
         state = RobotState(robot)
         self.reference_distances = self.model.compute_all(state)[0]
+        ref = self.reference_distances
         if self._pairs_spec != "auto":
-            for (a, b), d in zip(pairs, self.reference_distances, strict=True):
+            for (a, b), d in zip(pairs, ref, strict=True):
                 if d < self.d_s:
                     self.notes.append(
                         f"pair {a}/{b} is {d * 1000:.1f} mm apart in the reference posture "
                         f"(< d_s = {self.d_s * 1000:.0f} mm): it is pushed apart from the start"
                     )
+        else:
+            # Pairs already closer than d_s at rest (neighbours along a limb) would be pushed
+            # apart from the first tick, against the contacts: they keep half their rest gap.
+            close = np.flatnonzero(ref < self.d_s)
+            if close.size:
+                self.safety[close] = 0.5 * ref[close]
+                examples = ", ".join(
+                    f"{pairs[i][0]}/{pairs[i][1]} ({ref[i] * 1000:.1f} mm)" for i in close[:3]
+                )
+                more = f" (+{close.size - 3} more)" if close.size > 3 else ""
+                self.notes.append(
+                    f"{close.size} pairs are closer than d_s in the reference posture: their "
+                    f"safety distance is half their rest distance: {examples}{more}"
+                )
         self._setup_rows(robot)
 
     def _auto_pairs(

@@ -175,6 +175,9 @@ def test_auto_pairs_are_reproducible_and_not_touching(robot_name, g1):
     # No kept pair touches at the reference posture (exact distances, 1e-6: GJK).
     d = CollisionModel(robot, a.pairs, broad_phase=False).compute_all(RobotState(robot))[0]
     assert d.min() >= a.touch_distance - 1e-6
+    # No kept pair is pushed apart at rest: safety distances never exceed rest distances
+    # (pairs closer than d_s keep half their rest gap).
+    assert np.all(a.safety <= d + 1e-6) and a.safety.min() > 0
     reasons = " ".join(a.left_out)
     assert "adjacent" in reasons
     lines = a.describe()
