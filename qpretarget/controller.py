@@ -568,11 +568,17 @@ class Controller:
             if fb is not None and fb.x is not None and np.all(np.isfinite(fb.x)):
                 v = fb.x
                 relaxed.update(fb.relaxed)
-                status = "relaxed"
-                messages.append(
-                    f"tick {self.tick}: hard constraints conflicted ({res.status}); "
-                    f"relaxed {fb.relaxed}."
-                )
+                if fb.relaxed:
+                    status = "relaxed"
+                    messages.append(
+                        f"tick {self.tick}: hard constraints conflicted ({res.status}); "
+                        f"relaxed {fb.relaxed}."
+                    )
+                else:
+                    messages.append(
+                        f"tick {self.tick}: the QP solver reported {res.status}; the fallback "
+                        "solved it without relaxing anything."
+                    )
         if relaxed and status == "ok":
             status = "relaxed"
         if v is None or not np.all(np.isfinite(v)):

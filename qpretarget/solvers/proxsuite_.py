@@ -111,6 +111,19 @@ class ProxSuiteSolver(QPSolver):
         x = res.x.copy()
         if not np.isfinite(x).all():
             x, ok = None, False
+        if not ok and not self._fresh and self.warm_start:
+            # A warm start far from the new solution can stall ProxQP: retry once cold.
+            st = self._qp.settings
+            st.initial_guess = proxqp.InitialGuess.NO_INITIAL_GUESS
+            self._qp.solve()
+            st.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+            res = self._qp.results
+            info = res.info
+            status = info.status
+            ok = status == _SOLVED
+            x = res.x.copy()
+            if not np.isfinite(x).all():
+                x, ok = None, False
         if not ok:
             # A failed solve leaves a poor warm start: rebuild the workspace next tick.
             self._shape = None
