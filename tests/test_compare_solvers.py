@@ -33,13 +33,16 @@ def clip(configs_dir, tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def comparison(configs_dir, clip, tmp_path_factory) -> tuple[dict, str]:
+def comparison(configs_dir, mocap_dir, tmp_path_factory) -> tuple[dict, str]:
+    """Every solver on 2 s of a real CMU clip, retargeted by the config's retarget: section."""
     out = tmp_path_factory.mktemp("cmp")
     names = [*available_solver_names(), "gurobi", "nosuchsolver"]
     argv = [
         "compare-solvers",
         str(configs_dir / "g1_augmentation.yaml"),
-        str(clip),
+        str(mocap_dir / "cmu_14_07_reach_up_tiptoe.bvh"),
+        "--seconds",
+        "2",
         "--solvers",
         ",".join(names),
         "-o",
