@@ -11,7 +11,7 @@
 
 Writes docs/figures/tosun_*.png and docs/results_tosun.md (every number in it comes from this run).
 
-    python scripts/tosun_figures.py            # 10 minutes on 2 cores shared with other jobs
+    python scripts/tosun_figures.py            # 2 minutes on 2 idle cores (15 under heavy load)
     python scripts/tosun_figures.py --quick    # fewer clips and alphas, for a smoke run
 """
 

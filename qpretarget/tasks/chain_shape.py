@@ -47,6 +47,8 @@ the world when ``None``): the robot's points become :math:`x = R^\top y` with Ja
 :math:`R^\top (J_y + [y]_\times J_\omega)`, :math:`J_\omega` the reference frame's angular rows.
 The source points, given in the same axes, can be turned first by ``source_rotation`` (how the
 source is mounted on the robot, e.g. a human arm onto an industrial arm).
+
+At acceleration level the drift :math:`\dot J v` of this task is taken as zero (not derived).
 """
 
 from __future__ import annotations
