@@ -224,11 +224,13 @@ def e_step(
     s2 = np.einsum("na,na->n", S, S)
     n2 = np.einsum("na,na->n", Sn, Sn) if use_n else None
     if mode == "dense":
-        a2 = np.einsum("ma,ma->m", A, A)
         for lo in range(0, N, chunk):
             Bc = B[lo : lo + chunk]
-            D = np.einsum("na,na->n", Bc, Bc)[:, None] + a2[None, :] - 2.0 * Bc @ A.T
-            np.maximum(D, 0.0, out=D)
+            # Squared distances coordinate by coordinate (no BLAS product, exact, >= 0).
+            D = np.zeros((len(Bc), M))
+            for c in range(A.shape[1]):
+                diff = Bc[:, c, None] - A[None, :, c]
+                D += diff * diff
             a = D * (-0.5 / sigma2)
             amax = a.max(axis=1)
             lse = amax + np.log(np.exp(a - amax[:, None]).sum(axis=1))
@@ -237,10 +239,10 @@ def e_step(
             post = np.exp(log_in + a - logp[:, None])
             w = post.sum(axis=1)
             P1[idx_act] += post.sum(axis=0)
-            Px[idx_act] += post.T @ S[lo : lo + chunk]
+            Px[idx_act] += np.einsum("nm,na->ma", post, S[lo : lo + chunk])
             wS2 += float(w @ s2[lo : lo + chunk])
             if use_n:
-                Pn[idx_act] += post.T @ Sn[lo : lo + chunk]  # type: ignore[index]
+                Pn[idx_act] += np.einsum("nm,na->ma", post, Sn[lo : lo + chunk])  # type: ignore[index]
                 wN2 += float(w @ n2[lo : lo + chunk])  # type: ignore[index]
             Np += float(w.sum())
     elif mode == "kdtree":
@@ -778,13 +780,16 @@ class CloudRetargeter:
         solver = make_solver(self.config.solver, path="solver")
         vi, qi = self._vi[self._bounded], self._qi[self._bounded]
         active = self._active(T.pose(q, jacobians=False))
+        rng = np.random.default_rng(0)
+        S_dense = S[np.sort(rng.choice(len(S), size=min(len(S), 1000), replace=False))]
         for it in range(iterations):
             posed = T.pose(q)
             if it % 5 == 0:
                 active = self._active(posed)
             dense = (sigma2 > CALIBRATION_DENSE_SIGMA**2 and it < 8) or em.estep == "dense"
+            # The coarse (dense) iterations use a fixed random subset of the cloud.
             est = e_step(
-                S,
+                S_dense if dense else S,
                 posed.points,
                 active,
                 sigma2,
@@ -796,11 +801,18 @@ class CloudRetargeter:
             Js = T.scale_jacobian(posed)
             if common:
                 Js = Js.sum(axis=2, keepdims=True)
-            J = np.concatenate([T.point_jacobians(posed, J6), Js], axis=2)
             E = est.Px - est.P1[:, None] * posed.points
-            Jw = (J * np.sqrt(est.P1)[:, None, None]).reshape(-1, nv + ns)
-            H = Jw.T @ Jw
-            b = J.reshape(-1, nv + ns).T @ E.reshape(-1)
+            # Pose block by the template's moments; the scale blocks by plain sums (no large
+            # BLAS product: multi-threaded BLAS is slow on a loaded machine).
+            H = np.empty((nv + ns, nv + ns))
+            b = np.empty(nv + ns)
+            H[:nv, :nv], b[:nv] = T.normal_equations(posed, J6, est.P1, E)
+            Jq = T.point_jacobians(posed, J6)
+            PJs = Js * est.P1[:, None, None]
+            H[:nv, nv:] = np.einsum("man,mak->nk", Jq, PJs)
+            H[nv:, :nv] = H[:nv, nv:].T
+            H[nv:, nv:] = np.einsum("man,mak->nk", Js, PJs)
+            b[nv:] = np.einsum("mak,ma->k", Js, E)
             if not common and cal.scale_prior > 0:
                 Pm = np.eye(K) - 1.0 / K
                 H[nv:, nv:] += 2 * sigma2 * cal.scale_prior * Pm

@@ -26,8 +26,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigError
-from .io import PinholeIntrinsics, depth_to_points
-from .meshes import LinkMeshes
+from .io import CloudFrame, CloudSequence, PinholeIntrinsics, depth_to_points
+from .meshes import LinkMeshes, load_link_meshes
 
 #: Triangles nearer than this to the camera plane are dropped [m].
 NEAR = 0.05
@@ -436,6 +436,125 @@ class HumanPoser:
         return out
 
 
+@dataclass
+class SyntheticSequence:
+    """Rendered frames with their ground truth.
+
+    Attributes:
+        sequence: the clouds (world frame, with the sensor position).
+        q: (T, nq) configurations of the rendered model.
+        link: per frame, (N,) index into ``meshes.link_names`` of each point (-1: outlier).
+        normals: per frame, (N, 3) true surface normals (0 for outliers).
+        clean: per frame, (N, 3) points before noise.
+        meshes: the rendered meshes. camera: the camera.
+    """
+
+    sequence: CloudSequence
+    q: np.ndarray
+    link: list[np.ndarray]
+    normals: list[np.ndarray]
+    clean: list[np.ndarray]
+    meshes: LinkMeshes
+    camera: Camera
+
+
+def render_sequence(
+    model: pin.Model,
+    meshes: LinkMeshes,
+    q: np.ndarray,
+    t: np.ndarray,
+    camera: Camera,
+    *,
+    noise: float = 0.005,
+    outlier_fraction: float = 0.05,
+    seed: int = 0,
+) -> SyntheticSequence:
+    """Render configurations ``q`` (T, nq) at times ``t`` (T,) into a noisy cloud sequence."""
+    rng = np.random.default_rng(seed)
+    data = model.createData()
+    frames, link, normals, clean = [], [], [], []
+    for k in range(len(q)):
+        pin.forwardKinematics(model, data, q[k])
+        out = render_cloud(
+            meshes, data, camera, noise=noise, outlier_fraction=outlier_fraction, rng=rng
+        )
+        frames.append(CloudFrame(out["points"], None, float(t[k])))
+        link.append(out["link"])
+        normals.append(out["normals"])
+        clean.append(out["clean"])
+    seq = CloudSequence(frames, sensor_position=camera.position, source="synthetic")
+    return SyntheticSequence(seq, np.asarray(q, float), link, normals, clean, meshes, camera)
+
+
+def human_clip_sequence(
+    keypoints: Mapping[str, np.ndarray],
+    orientations: Mapping[str, np.ndarray],
+    t: np.ndarray,
+    *,
+    calibration_frames: int = 4,
+    arm_abduction: float = 0.5,
+    distance: float = 2.8,
+    noise: float = 0.005,
+    outlier_fraction: float = 0.05,
+    seed: int = 0,
+    poser: HumanPoser | None = None,
+) -> tuple[SyntheticSequence, HumanPoser]:
+    """The human model posed by a clip, rendered by a Kinect-like camera in front of it.
+
+    The sequence starts with the calibration posture (standing upright facing the camera, arms
+    abducted by ``arm_abduction`` [rad], at the clip's first position and heading), then
+    ``calibration_frames`` frames interpolating to the clip's first pose, then the clip. The
+    floor is put at z = 0 under the lowest point of the first frame.
+
+    Args:
+        keypoints: clip key-points, name -> (T, 3) [m], z up (``motion.keypoints()``).
+        orientations: ``waist``/``torso``/``head`` -> (T, 3, 3) (``keypoint_orientations()``).
+        t: (T,) clip times [s].
+        calibration_frames: frames moving from the calibration posture into the clip.
+        arm_abduction: shoulder abduction of the calibration posture [rad].
+        distance: horizontal distance of the camera in front of the person [m].
+        noise: range noise [m].
+        outlier_fraction: fraction of outliers in each cloud.
+        seed: random seed.
+        poser: an existing :class:`HumanPoser` (built otherwise).
+    """
+    poser = poser if poser is not None else HumanPoser()
+    h = poser.robot
+    Q = poser.pose_sequence(keypoints, orientations)
+    fwd = np.asarray(orientations["waist"][0], float)[:, 0].copy()
+    fwd[2] = 0.0
+    fwd /= np.linalg.norm(fwd)
+    qa = pin.neutral(h.model)
+    qa[:3] = Q[0][:3]
+    yaw = np.arctan2(fwd[1], fwd[0])
+    qa[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.0, 0.0, yaw) @ HUMAN_TO_Z_UP).coeffs()
+    for side in ("left", "right"):
+        qa[h.joint_q_index[h.joint_index(f"{side}_shoulder_X")]] = arm_abduction
+    n = int(calibration_frames)
+    lead = [pin.interpolate(h.model, qa, Q[0], a) for a in np.linspace(0.0, 1.0, n + 2)[:-1]]
+    Qall = np.array(lead + list(Q))
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / 30.0
+    times = np.concatenate([np.arange(len(lead)) * dt, t - t[0] + len(lead) * dt])
+    meshes = load_link_meshes(h.model, h.urdf_path)
+    data = h.model.createData()
+    pin.forwardKinematics(h.model, data, Qall[0])
+    Qall[:, 2] -= meshes.posed(data)[..., 2].min()
+    w0 = np.asarray(keypoints["waist"][0], float).copy()
+    w0[2] = 0.0
+    camera = kinect_camera(w0 + distance * fwd + [0.0, 0.0, 1.2], w0 + [0.0, 0.0, 0.9])
+    syn = render_sequence(
+        h.model,
+        meshes,
+        Qall,
+        times,
+        camera,
+        noise=noise,
+        outlier_fraction=outlier_fraction,
+        seed=seed,
+    )
+    return syn, poser
+
+
 def joint_observability(
     model: pin.Model,
     data: pin.Data,
@@ -519,6 +638,9 @@ def joint_uncertainty(
 
 
 __all__ = [
+    "SyntheticSequence",
+    "human_clip_sequence",
+    "render_sequence",
     "HUMAN_TO_Z_UP",
     "joint_observability",
     "joint_uncertainty",

@@ -1,0 +1,62 @@
+# SPDX-License-Identifier: Apache-2.0
+"""``qpretarget retarget-cloud``: a run file other commands can read, and clear errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from qpretarget.cli import main
+from qpretarget.trajectory import RobotTrajectory
+
+CONFIG = """
+name: cloud_test
+robot: g1
+calibration: {enabled: false}
+em: {max_iterations: 5, refine_iterations: 1}
+stability: {mode: qp}
+"""
+
+
+@pytest.fixture(scope="module")
+def clouds(g1_sequence, tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "clouds.npz"
+    seq = g1_sequence.sequence
+    type(seq)(seq.frames[:3], seq.sensor_position).save(path)
+    return path
+
+
+def test_retarget_cloud_writes_a_run(tmp_path, clouds, g1, capsys):
+    cfg = tmp_path / "cloud.yaml"
+    cfg.write_text(CONFIG)
+    out = tmp_path / "run.npz"
+    assert main(["retarget-cloud", str(cfg), str(clouds), "-o", str(out), "--no-progress"]) == 0
+    assert "3 frames" in capsys.readouterr().out
+    run = RobotTrajectory.load(out)
+    assert run.q.shape == (3, g1.nq) and run.joint_names == g1.joint_names
+    assert run.contacts.shape == (3, 2) and run.contacts.any(axis=1).all()
+    assert "cloud/q_fit" in run.extra and run.meta["command"] == "retarget-cloud"
+    # The stored config rebuilds a controller (evaluate and view rely on it).
+    assert run.make_controller().robot.nq == g1.nq
+    # The robot stands on its primary sole: one sole at z = 0 in every frame (1e-9 m).
+    import pinocchio as pin
+
+    data = g1.model.createData()
+    for q in run.q:
+        pin.framesForwardKinematics(g1.model, data, q)
+        z = [data.oMf[g1.frame_id(f.frame)].translation[2] for f in g1.feet.values()]
+        assert min(abs(v) for v in z) < 1e-9
+
+
+def test_retarget_cloud_errors(tmp_path, clouds, capsys):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text("robot: g1\nem: {outlier_wieght: 0.1}\n")
+    assert main(["retarget-cloud", str(cfg), str(clouds), "-o", str(tmp_path / "r.npz")]) == 2
+    assert "outlier_weight" in capsys.readouterr().err  # the close match is suggested
+    good = tmp_path / "good.yaml"
+    good.write_text(CONFIG)
+    assert main(["retarget-cloud", str(good), str(tmp_path / "none.npz"), "-o", "r.npz"]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    np.save(tmp_path / "stack.npy", np.zeros((2, 5, 3)))
+    assert main(["retarget-cloud", str(good), str(tmp_path / "stack.npy"), "-o", "r.npz"]) == 2
+    assert "--rate" in capsys.readouterr().err
