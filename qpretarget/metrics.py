@@ -37,6 +37,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from .errors import ConfigError, QPRetargetError, close_matches_hint
+from .geometry2d import convex_hull_2d  # noqa: F401 (re-exported)
 from .robot import RobotModel
 from .trajectory import RobotTrajectory, TrajectoryFormatError
 
@@ -127,32 +128,6 @@ def joint_limit_violations(
     hi = np.asarray(q_max, float)
     amount = np.maximum(np.maximum(lo - q, q - hi), 0.0)
     return amount > tolerance, amount
-
-
-def convex_hull_2d(points: npt.ArrayLike) -> np.ndarray:
-    """Counter-clockwise convex hull of 2-D points (Andrew's monotone chain).
-
-    Returns:
-        (m, 2) hull vertices, counter-clockwise, without repeating the first one.
-    """
-    pts = np.unique(np.asarray(points, float).reshape(-1, 2), axis=0)
-    if len(pts) <= 2:
-        return pts
-
-    def half(seq: Iterable[np.ndarray]) -> list[np.ndarray]:
-        out: list[np.ndarray] = []
-        for p in seq:
-            while len(out) >= 2:
-                o, a = out[-2], out[-1]
-                if (a[0] - o[0]) * (p[1] - o[1]) - (a[1] - o[1]) * (p[0] - o[0]) > 1e-15:
-                    break
-                out.pop()
-            out.append(p)
-        return out
-
-    lower = half(pts)
-    upper = half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
 
 
 def signed_distance_to_polygon(point: npt.ArrayLike, polygon: npt.ArrayLike) -> float:
@@ -462,22 +437,18 @@ class LinkPairDistances:
     def _link(robot: RobotModel, name: str) -> str:
         """A key-point or frame name -> the link (body frame) holding its collision geometry."""
         from .collision import link_shapes
+        from .constraints.self_collision import resolve_link
+        from .errors import UnknownNameError
 
         shapes = link_shapes(robot)
-        if name in shapes:
-            return name
-        frame = robot.keyframes.get(name, name)
-        if frame in shapes:
-            return frame
-        if robot.model.existFrame(frame):
-            joint = robot.model.frames[robot.model.getFrameId(frame)].parentJoint
-            links = [n for n, s in shapes.items() if s.joint == joint]
-            if len(links) == 1:
-                return links[0]
-        raise MetricsError(
-            f"collision pair body {name!r} is not a link with collision geometry."
-            f"{close_matches_hint(name, list(shapes))} Links with geometry: {', '.join(shapes)}."
-        )
+        try:
+            return resolve_link(robot, shapes, name, "pairs")
+        except UnknownNameError:
+            raise MetricsError(
+                f"collision pair body {name!r} is not a link with collision geometry."
+                f"{close_matches_hint(name, list(shapes))} "
+                f"Links with geometry: {', '.join(shapes)}."
+            ) from None
 
     def distances(self, q: np.ndarray) -> np.ndarray:
         """Distance of every pair at configuration ``q`` [m] (P,)."""

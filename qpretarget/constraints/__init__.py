@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Hard-constraint modules. Each registers itself under its YAML ``type:`` in :data:`CONSTRAINTS`."""
+"""Hard-constraint modules, registered under their YAML ``type:`` in :data:`CONSTRAINTS`."""
 
 from . import acceleration_limits, contacts, support_polygon  # noqa: F401
 from .base import CONSTRAINTS, Constraint, ConstraintBlock

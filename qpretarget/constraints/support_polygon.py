@@ -37,40 +37,11 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigError
+from ..geometry2d import convex_hull_2d  # noqa: F401 (re-exported)
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
 from .contacts import velocity_kinematics
-
-
-def convex_hull_2d(points: np.ndarray) -> np.ndarray:
-    """Vertices of the convex hull of 2-D points, counter-clockwise (Andrew's monotone chain).
-
-    Collinear points on an edge are dropped. Runs only when contacts change (a few dozen points).
-
-    Args:
-        points: (m, 2) points.
-
-    Returns:
-        (h, 2) hull vertices in counter-clockwise order (h <= m; fewer than 3 for degenerate sets).
-    """
-    pts = np.unique(np.asarray(points, dtype=float).reshape(-1, 2), axis=0)  # sorted by x, then y
-    if len(pts) <= 2:
-        return pts
-
-    def half(seq: np.ndarray) -> list[np.ndarray]:
-        out: list[np.ndarray] = []
-        for p in seq:
-            while len(out) >= 2:
-                a, b = out[-2], out[-1]
-                if (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) > 1e-12:
-                    break
-                out.pop()
-            out.append(p)
-        return out
-
-    lower, upper = half(pts), half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
 
 
 def polygon_halfplanes(vertices: np.ndarray, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

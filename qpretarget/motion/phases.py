@@ -49,6 +49,8 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
+from ..geometry2d import convex_hull_2d as convex_hull  # noqa: F401
+
 #: Support phases, as stored in runs.
 PHASES = ("double", "left", "right")
 SIDES = ("left", "right")
@@ -673,31 +675,6 @@ class SupportSequencer:
         self._replanned = False
         self._move_foot(t, start, landing)
         self._swing_target = None
-
-
-def convex_hull(points: np.ndarray) -> np.ndarray:
-    """Counter-clockwise convex hull of 2-D points (monotone chain), ``(n, 2)``.
-
-    Points are rounded to 1e-9 m first and collinear points dropped, so numerical noise on
-    coincident sole corners never makes a degenerate edge.
-    """
-    pts = sorted({(round(float(x), 9), round(float(y), 9)) for x, y in np.asarray(points, float)})
-    if len(pts) <= 2:
-        return np.array(pts)
-
-    def half(seq: list[tuple[float, float]]) -> list[tuple[float, float]]:
-        out: list[tuple[float, float]] = []
-        for p in seq:
-            while len(out) >= 2:
-                (ax, ay), (bx, by) = out[-2], out[-1]
-                if (bx - ax) * (p[1] - ay) - (by - ay) * (p[0] - ax) > 1e-12:
-                    break
-                out.pop()
-            out.append(p)
-        return out
-
-    lower, upper = half(pts), half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
 
 
 def shrink_polygon(hull: np.ndarray, margin: float) -> np.ndarray:

@@ -6,20 +6,14 @@ from __future__ import annotations
 import pytest
 
 from qpretarget.cli import main
-from qpretarget.controller import Controller
 from qpretarget.errors import QPRetargetError
-from qpretarget.solver_comparison import record_run, scripted_targets
 from qpretarget.trajectory import RobotTrajectory
 from qpretarget.viz.render import render_run
 
 
 @pytest.fixture(scope="module")
-def run_2s(configs_dir, tmp_path_factory):
-    ctrl = Controller.from_yaml(configs_dir / "g1_augmentation.yaml")
-    traj = record_run(ctrl, list(scripted_targets(ctrl, 2.0)))
-    path = tmp_path_factory.mktemp("run") / "run.npz"
-    traj.save(path)
-    return path
+def run_2s(make_run):
+    return make_run(2.0)
 
 
 def test_render_gif_frame_count_and_size(run_2s, tmp_path) -> None:

@@ -13,18 +13,14 @@ import numpy as np
 import pytest
 
 from qpretarget.controller import Controller
-from qpretarget.solver_comparison import record_run, scripted_targets
+from qpretarget.solver_comparison import scripted_targets
 from qpretarget.viz.screenshot import screenshot
 from qpretarget.viz.viewer import ViewerError, choose_port
 
 
 @pytest.fixture(scope="module")
-def short_run(configs_dir, tmp_path_factory):
-    ctrl = Controller.from_yaml(configs_dir / "g1_augmentation.yaml")
-    traj = record_run(ctrl, list(scripted_targets(ctrl, 1.0)))
-    path = tmp_path_factory.mktemp("run") / "run.npz"
-    traj.save(path)
-    return path
+def short_run(make_run):
+    return make_run(1.0)
 
 
 def test_viewer_draws_robot_and_timeline(short_run, tmp_path) -> None:
