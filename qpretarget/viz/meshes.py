@@ -69,12 +69,16 @@ def _coarse_hull(mesh, max_points: int):  # noqa: ANN001, ANN202
         hull = ConvexHull(pts)
     except Exception:
         return mesh.convex_hull
-    used = np.unique(hull.simplices)
+    # Wind every triangle counter-clockwise seen from outside: its normal must agree with the
+    # outward normal qhull reports for that facet (no graph traversal needed on a convex hull).
+    faces = hull.simplices.copy()
+    a, b, c = (pts[faces[:, i]] for i in range(3))
+    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0.0
+    faces[flip] = faces[flip][:, ::-1]
+    used = np.unique(faces)
     remap = np.full(len(pts), -1)
     remap[used] = np.arange(len(used))
-    out = trimesh.Trimesh(pts[used], remap[hull.simplices], process=False)
-    out.fix_normals()
-    return out
+    return trimesh.Trimesh(pts[used], remap[faces], process=False)
 
 
 def _resolve_uri(uri: str, urdf_dir: Path) -> Path:
