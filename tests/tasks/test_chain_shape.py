@@ -74,7 +74,9 @@ def test_normalized_pose_is_invariant_to_translation_and_scale() -> None:
     np.testing.assert_allclose(normalized_pose(P, [0.0])[0], np.zeros(3), atol=1e-15)
     # P(1) is the end effector at distance <= 1 and the arc length of the samples is exact
     lengths = np.linalg.norm(np.diff(P, axis=0), axis=1)
-    np.testing.assert_allclose(normalized_pose(P, [1.0])[0], (P[-1] - P[0]) / lengths.sum(), atol=1e-12)
+    np.testing.assert_allclose(
+        normalized_pose(P, [1.0])[0], (P[-1] - P[0]) / lengths.sum(), atol=1e-12
+    )
     # s is arc length: consecutive samples 1/m apart in s are 1/m apart in space on a segment,
     # closer when they straddle a joint (4 of the m steps); 1e-12 is rounding.
     m = 20000

@@ -75,3 +75,47 @@ def test_live_viewer_streams_a_running_controller(configs_dir) -> None:
 
         with urllib.request.urlopen(live.url, timeout=30) as page:
             assert page.status == 200 and b"<html" in page.read(2000).lower()
+
+
+def test_view_command_stops_cleanly_on_ctrl_c(configs_dir) -> None:
+    """`qpretarget view CONFIG` serves until Ctrl-C, then says so, exits 0 and frees its port."""
+    import os
+    import re
+    import signal
+    import subprocess
+    import sys
+    import time
+    import urllib.request
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "qpretarget", "view", str(configs_dir / "g1_whole_body.yaml"),
+         "--port", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )  # fmt: skip
+    try:
+        url = None
+        deadline = time.monotonic() + 120.0
+        lines = []
+        while url is None and time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line and proc.poll() is not None:
+                break
+            lines.append(line)
+            m = re.search(r"on (http://127\.0\.0\.1:(\d+))", line)
+            if m:
+                url, port = m.group(1), int(m.group(2))
+        assert url is not None, "viewer did not start:\n" + "".join(lines)
+        with urllib.request.urlopen(url, timeout=10) as page:  # serving the client page
+            assert page.status == 200
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, out
+    assert "stopping (Ctrl-C)" in out
+    assert "Traceback" not in out
+    with socket.socket() as s:  # the port is free again
+        s.bind(("127.0.0.1", port))
