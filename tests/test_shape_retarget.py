@@ -163,7 +163,9 @@ def _pr2_minimum(pr2: Controller, src: np.ndarray, starts: int, seed: int) -> tu
     rng = np.random.default_rng(seed)
     best = np.inf
     for _ in range(starts):
-        x0 = rng.uniform(np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi))
+        x0 = rng.uniform(
+            np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi)
+        )
         r = minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
                      options={"ftol": 1e-15, "gtol": 1e-10, "maxiter": 2000})  # fmt: skip
         best = min(best, float(r.fun))
