@@ -347,98 +347,178 @@ class Viewer:
         self.close()
 
 
-def _live_main(robot_spec: Any, base_dir: str | None, host: str, port: int, shared: Any,
-               counter: Any, stop: Any, ready: Any, max_rate: float) -> None:  # fmt: skip
-    """Child process of :class:`LiveViewer`: hosts the viser server and draws the latest q."""
+def _read_latest(buf: np.ndarray, out: np.ndarray, seen: int) -> int:
+    """Copy the newest configuration of a seqlock buffer into ``out``; return its counter.
+
+    ``buf = [counter, q...]``: the writer makes the counter odd, writes q, then makes it even
+    (:meth:`LiveViewer.__call__`). A copy is kept only if the counter was even and unchanged
+    around it; otherwise (a write in progress) ``seen`` is returned and the next poll retries.
+    """
+    c1 = buf[0]
+    if c1 == seen or int(c1) % 2:
+        return seen
+    np.copyto(out, buf[1:])
+    return int(c1) if buf[0] == c1 else seen
+
+
+def _live_main(argv: list[str] | None = None) -> int:
+    """Viewer process of :class:`LiveViewer` (``python -m qpretarget.viz.viewer``).
+
+    Hosts the viser server, prints ``PORT <n>`` once serving, then draws the newest
+    configuration of the shared-memory seqlock at most ``--max-rate`` times a second until the
+    stop slot is set, its parent dies, or it is interrupted.
+    """
+    import argparse
+    import json
+    import os
+    import sys
+    from multiprocessing import shared_memory
     from pathlib import Path
 
     from ..robot import load_robot
 
-    spec = robot_spec
-    if isinstance(spec, dict) and base_dir is not None:
-        spec = dict(spec)
+    ap = argparse.ArgumentParser(prog="python -m qpretarget.viz.viewer")
+    ap.add_argument("--robot", required=True, help="robot spec as JSON")
+    ap.add_argument("--base-dir", default=None)
+    ap.add_argument("--host", default="127.0.0.1")
+    ap.add_argument("--port", type=int, default=0)
+    ap.add_argument("--shm", required=True)
+    ap.add_argument("--nq", type=int, required=True)
+    ap.add_argument("--max-rate", type=float, default=30.0)
+    args = ap.parse_args(argv)
+    spec = json.loads(args.robot)
+    if isinstance(spec, dict) and args.base_dir is not None:
         for k in ("urdf", "srdf"):
             if spec.get(k) and not str(spec[k]).startswith("example-robot-data:"):
-                spec[k] = str((Path(base_dir) / str(spec[k])).resolve())
-    viewer = Viewer(load_robot(spec), host=host, port=port, verbose=False)
-    ready.put(viewer.port)
-    view = np.frombuffer(shared.get_obj(), dtype=float)
-    period = 1.0 / max_rate
-    seen = 0
+                spec[k] = str((Path(args.base_dir) / str(spec[k])).resolve())
+    shm = shared_memory.SharedMemory(name=args.shm)
+    with contextlib.suppress(Exception):  # the parent owns the segment: never unlink it here
+        from multiprocessing import resource_tracker
+
+        resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
     try:
-        while not stop.is_set():
-            time.sleep(period)
-            if counter.value != seen:
-                with shared.get_lock():
-                    q = view.copy()
-                    seen = counter.value
-                viewer.set_configuration(q)
-    except KeyboardInterrupt:
-        pass
+        # [stop flag, counter, q...]: the parent owns (and unlinks) the segment.
+        flags = np.ndarray((args.nq + 2,), dtype=float, buffer=shm.buf)
+        buf = flags[1:]
+        viewer = Viewer(load_robot(spec), host=args.host, port=args.port, verbose=False)
+        print(f"PORT {viewer.port}", flush=True)
+        parent = os.getppid()
+        q = np.empty(args.nq)
+        period = 1.0 / args.max_rate
+        seen = 0
+        try:
+            while flags[0] == 0.0 and os.getppid() == parent:
+                time.sleep(period)
+                got = _read_latest(buf, q, seen)
+                if got != seen:
+                    seen = got
+                    viewer.set_configuration(q)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            viewer.close()
+            del flags, buf
     finally:
-        viewer.close()
+        shm.close()
+    sys.stdout.flush()
+    return 0
 
 
 class LiveViewer:
     """A browser viewer in its own process, fed by a running controller.
 
     ``ctrl.add_observer(LiveViewer(ctrl))`` streams every tick: the control loop only copies the
-    new configuration into shared memory (a few microseconds, never blocking on the viewer), and
+    new configuration into shared memory (about a microsecond, never blocking on the viewer), and
     the viewer process draws the newest one at most ``max_rate`` times per second. Being another
-    process, it takes no time from the loop's interpreter (no GIL contention, no pickling).
+    process, it takes no time from the loop's interpreter (no GIL contention, no pickling). The
+    process is started with ``python -m qpretarget.viz.viewer``, so a plain script without an
+    ``if __name__ == "__main__":`` guard can use it.
 
     Args:
         controller: the controller whose robot is shown.
         host, port: where to serve (``port=0``: any free port; a taken port moves to a free one).
         max_rate: drawing rate cap [Hz].
+        timeout: how long to wait for the viewer process to serve [s].
     """
 
     def __init__(self, controller: Any, *, host: str = "127.0.0.1", port: int = 8080,
                  max_rate: float = 30.0, timeout: float = 120.0) -> None:  # fmt: skip
-        import multiprocessing as mp
+        import json
+        import subprocess
+        import sys
+        from multiprocessing import shared_memory
 
         _viser()  # fail early, in this process, when the extra is missing
-        ctx = mp.get_context("spawn")
         nq = controller.robot.nq
-        self._shared = ctx.Array("d", nq)
-        self._counter = ctx.Value("L", 0, lock=False)
-        self._stop = ctx.Event()
-        self._view = np.frombuffer(self._shared.get_obj(), dtype=float)
-        ready = ctx.Queue()
+        self._shm = shared_memory.SharedMemory(create=True, size=8 * (nq + 2))
+        self._flags = np.ndarray((nq + 2,), dtype=float, buffer=self._shm.buf)
+        self._flags[:] = 0.0
+        self._buf = self._flags[1:]  # [counter, q...] (seqlock, see _read_latest)
+        self._q = self._buf[1:]
         port, note = choose_port(host, port)
         if note:
             print(f"qpretarget live viewer: {note}")
         base = getattr(controller, "base_dir", None)
-        self._proc = ctx.Process(
-            target=_live_main,
-            args=(controller.config["robot"], str(base) if base else None, host, port,
-                  self._shared, self._counter, self._stop, ready, max_rate),
-            daemon=True,
-            name="qpretarget-live-viewer",
-        )  # fmt: skip
-        self._proc.start()
-        try:
-            self.port = int(ready.get(timeout=timeout))
-        except Exception:
-            self._proc.terminate()
-            raise ViewerError("the live viewer process did not start (see its output).") from None
+        cmd = [sys.executable, "-m", "qpretarget.viz.viewer",
+               "--robot", json.dumps(controller.config["robot"]), "--host", host,
+               "--port", str(port), "--shm", self._shm.name, "--nq", str(nq),
+               "--max-rate", str(float(max_rate))]  # fmt: skip
+        if base:
+            cmd += ["--base-dir", str(base)]
+        self._proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+        self.port = self._wait_for_port(timeout)
         self.url = f"http://{host}:{self.port}"
         self.sent = 0
 
+    def _wait_for_port(self, timeout: float) -> int:
+        out: list[str] = []
+
+        def read() -> None:
+            for line in self._proc.stdout:  # type: ignore[union-attr]
+                out.append(line)
+                if line.startswith("PORT "):
+                    return
+
+        th = threading.Thread(target=read, daemon=True)
+        th.start()
+        th.join(timeout)
+        for line in out:
+            if line.startswith("PORT "):
+                return int(line.split()[1])
+        self.close()
+        raise ViewerError(
+            "the live viewer process did not start within "
+            f"{timeout:.0f} s (its output is above{': ' + ''.join(out).strip() if out else ''})."
+        )
+
     def __call__(self, result: Any) -> None:
-        """Publish the tick's configuration to the viewer process."""
+        """Publish the tick's configuration to the viewer process (seqlock write)."""
         q = result.q if hasattr(result, "q") else result
-        with self._shared.get_lock():
-            np.copyto(self._view, q)
-            self._counter.value += 1
+        buf = self._buf
+        buf[0] += 1.0  # odd: writing
+        np.copyto(self._q, q)
+        buf[0] += 1.0  # even: consistent
         self.sent += 1
 
     def close(self) -> None:
-        """Stop the viewer process."""
-        self._stop.set()
-        self._proc.join(timeout=5.0)
-        if self._proc.is_alive():
-            self._proc.terminate()
+        """Stop the viewer process and free the shared memory."""
+        proc = getattr(self, "_proc", None)
+        if proc is not None and proc.poll() is None:
+            self._flags[0] = 1.0
+            try:
+                proc.wait(timeout=5.0)
+            except Exception:
+                proc.terminate()
+                proc.wait(timeout=5.0)
+        if proc is not None and proc.stdout is not None:
+            proc.stdout.close()
+        shm = getattr(self, "_shm", None)
+        if shm is not None:
+            self._flags = self._buf = self._q = None  # type: ignore[assignment]
+            shm.close()
+            with contextlib.suppress(FileNotFoundError):
+                shm.unlink()
+            self._shm = None
 
     def __enter__(self) -> LiveViewer:
         return self
@@ -448,3 +528,9 @@ class LiveViewer:
 
 
 ObserverFn = Callable[[Any], None]
+
+
+if __name__ == "__main__":  # the LiveViewer process
+    import sys
+
+    sys.exit(_live_main())

@@ -119,3 +119,27 @@ def test_view_command_stops_cleanly_on_ctrl_c(configs_dir) -> None:
     assert "Traceback" not in out
     with socket.socket() as s:  # the port is free again
         s.bind(("127.0.0.1", port))
+
+
+def test_live_viewer_from_a_plain_script(configs_dir, tmp_path) -> None:
+    """A user's top-level loop (no `if __name__ == "__main__":` guard) can stream to a viewer."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "loop.py"
+    script.write_text(
+        "from qpretarget import Controller\n"
+        "from qpretarget.solver_comparison import scripted_targets\n"
+        "from qpretarget.viz.viewer import LiveViewer\n"
+        f"ctrl = Controller.from_yaml({str(configs_dir / 'g1_augmentation.yaml')!r})\n"
+        "live = LiveViewer(ctrl, port=0)\n"
+        "ctrl.add_observer(live)\n"
+        "for tg in scripted_targets(ctrl, 0.2):\n"
+        "    res = ctrl.step(tg)\n"
+        "live.close()\n"
+        "print('sent', live.sent, 'messages', res.messages)\n"
+    )
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=180)
+    assert out.returncode == 0, out.stderr
+    assert "sent 20 messages []" in out.stdout
+    assert "leaked" not in out.stderr and "Traceback" not in out.stderr
