@@ -7,6 +7,7 @@ qpsolvers calls are stateless (no warm start): this backend is for comparing sol
 
 from __future__ import annotations
 
+import contextlib
 import time
 from typing import Any
 
@@ -59,6 +60,24 @@ def installed_qpsolvers() -> list[str]:
     return sorted(qpsolvers.available_solvers)
 
 
+class _NullWriter:
+    def write(self, text: str) -> int:
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+def _stdout_silenced() -> contextlib.AbstractContextManager:
+    """Drop what is written to ``sys.stdout`` in the block.
+
+    OSQP 1.x prints "Polishing not needed ..." through Python's stdout even with
+    ``verbose=False``: hundreds of lines in a solver comparison. (Another thread printing during
+    the call is silenced too; the call is a comparison backend's, never the control loop's.)
+    """
+    return contextlib.redirect_stdout(_NullWriter())
+
+
 class QpsolversSolver(QPSolver):
     """Solve with ``qpsolvers.solve_problem(problem, solver=name)``.
 
@@ -79,6 +98,8 @@ class QpsolversSolver(QPSolver):
             )
         self.name = solver  # type: ignore[misc]
         self.options = {**DEFAULT_OPTIONS.get(solver, {}), **options}
+        # Backends that print when told not to (see _stdout_silenced).
+        self._silence = solver == "osqp" and not self.options.get("verbose", False)
 
     def settings_summary(self) -> dict[str, Any]:
         return dict(self.options)
@@ -88,7 +109,11 @@ class QpsolversSolver(QPSolver):
         parts = problem.split()
         qp = qpsolvers.Problem(**parts)
         try:
-            sol = qpsolvers.solve_problem(qp, solver=self.name, **self.options)
+            if self._silence:
+                with _stdout_silenced():
+                    sol = qpsolvers.solve_problem(qp, solver=self.name, **self.options)
+            else:
+                sol = qpsolvers.solve_problem(qp, solver=self.name, **self.options)
         except Exception as exc:  # a backend error is a failed tick, not a crash of the loop
             return QPSolution(None, False, f"error: {exc}", solve_time=time.perf_counter() - t0)
         x = sol.x if sol.x is not None and np.all(np.isfinite(sol.x)) else None

@@ -76,3 +76,16 @@ def test_unknown_proxsuite_option() -> None:
         match=r"solver\.eps_ab: unknown ProxSuite option 'eps_ab'\. Did you mean 'eps_abs'",
     ):
         make_solver({"name": "proxsuite", "eps_ab": 1e-6})
+
+
+def test_osqp_prints_nothing_when_not_verbose(problems: list, capfd) -> None:
+    # OSQP 1.x prints "Polishing not needed ..." on the second problem (no active bound at its
+    # optimum) even with verbose off; the backend silences stdout around the call, and only there.
+    solver = make_solver("osqp")
+    capfd.readouterr()
+    sols = [solver.solve(p) for p in problems]
+    print("after the solve")
+    out = capfd.readouterr().out
+    assert all(s.success for s in sols)
+    assert "Polishing" not in out
+    assert "after the solve" in out
