@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import contextlib
 import time
+import warnings
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -60,6 +62,10 @@ def installed_qpsolvers() -> list[str]:
     return sorted(qpsolvers.available_solvers)
 
 
+#: Backends that want sparse (CSC) matrices: the dense problem is converted once per call here.
+SPARSE_SOLVERS = frozenset({"osqp", "scs", "qpalm"})
+
+
 class _NullWriter:
     def write(self, text: str) -> int:
         return len(text)
@@ -68,14 +74,19 @@ class _NullWriter:
         pass
 
 
-def _stdout_silenced() -> contextlib.AbstractContextManager:
-    """Drop what is written to ``sys.stdout`` in the block.
+@contextlib.contextmanager
+def _quiet() -> Iterator[None]:
+    """Drop what a backend prints to ``sys.stdout`` and its pending-deprecation chatter.
 
     OSQP 1.x prints "Polishing not needed ..." through Python's stdout even with
-    ``verbose=False``: hundreds of lines in a solver comparison. (Another thread printing during
-    the call is silenced too; the call is a comparison backend's, never the control loop's.)
+    ``verbose=False``, and warns on every solve that qpsolvers does not pass ``raise_error``:
+    hundreds of lines in a solver comparison that nobody can act on. (Another thread printing
+    during the call is silenced too; this is a comparison backend, never the control loop's.)
     """
-    return contextlib.redirect_stdout(_NullWriter())
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=PendingDeprecationWarning)
+        with contextlib.redirect_stdout(_NullWriter()):
+            yield
 
 
 class QpsolversSolver(QPSolver):
@@ -98,7 +109,7 @@ class QpsolversSolver(QPSolver):
             )
         self.name = solver  # type: ignore[misc]
         self.options = {**DEFAULT_OPTIONS.get(solver, {}), **options}
-        # Backends that print when told not to (see _stdout_silenced).
+        # Backends that print when told not to (see _quiet).
         self._silence = solver == "osqp" and not self.options.get("verbose", False)
 
     def settings_summary(self) -> dict[str, Any]:
@@ -107,10 +118,16 @@ class QpsolversSolver(QPSolver):
     def solve(self, problem: QPProblem) -> QPSolution:
         t0 = time.perf_counter()
         parts = problem.split()
+        if self.name in SPARSE_SOLVERS:  # they take CSC matrices (and warn on dense ones)
+            from scipy import sparse
+
+            for key in ("P", "G", "A"):
+                if parts[key] is not None:
+                    parts[key] = sparse.csc_matrix(parts[key])
         qp = qpsolvers.Problem(**parts)
         try:
             if self._silence:
-                with _stdout_silenced():
+                with _quiet():
                     sol = qpsolvers.solve_problem(qp, solver=self.name, **self.options)
             else:
                 sol = qpsolvers.solve_problem(qp, solver=self.name, **self.options)
