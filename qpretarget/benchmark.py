@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from .controller import Controller
+from .yamlio import load_yaml
 
 
 def machine_info() -> dict[str, Any]:
@@ -63,7 +63,7 @@ def load_config(config: str | Path | dict[str, Any]) -> tuple[dict[str, Any], Pa
     if isinstance(config, dict):
         return copy.deepcopy(config), None
     path = Path(config)
-    return yaml.safe_load(path.read_text()), path.parent
+    return load_yaml(path.read_text()), path.parent
 
 
 def bench_config(

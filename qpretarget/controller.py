@@ -34,6 +34,7 @@ from .solvers import make_solver
 from .strategies import STRATEGIES, Strategy, TickProblem
 from .tasks import TASKS, Task
 from .weighting import REGULARIZATIONS, Regularization
+from .yamlio import load_yaml
 
 TOP_LEVEL_KEYS = (
     "name", "description", "robot", "dt", "level", "strategy", "regularization", "solver",
@@ -297,7 +298,7 @@ class Controller:
             raise ConfigError(f"config file {str(path)!r} does not exist.")
         try:
             with open(path, encoding="utf-8") as f:
-                cfg = yaml.safe_load(f)
+                cfg = load_yaml(f)
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
             where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

@@ -36,12 +36,12 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-import yaml
 
 from .controller import Controller
 from .errors import ConfigError, QPRetargetError
 from .metrics import rmse
 from .trajectory import RobotTrajectory
+from .yamlio import load_yaml
 
 #: Solvers compared when none are named: the native ProxSuite path, then every installed
 #: qpsolvers backend.
@@ -630,7 +630,7 @@ def compare_solvers(
         path = Path(config)
         if not path.is_file():
             raise ConfigError(f"config file {str(path)!r} does not exist.")
-        cfg = yaml.safe_load(path.read_text(encoding="utf-8"))
+        cfg = load_yaml(path.read_text(encoding="utf-8"))
         if not isinstance(cfg, Mapping):
             raise ConfigError(f"{path}: the file must hold a mapping (robot:, tasks:, ...).")
         base_dir, label = path.parent, str(path)

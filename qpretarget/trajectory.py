@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from .errors import QPRetargetError
+from .yamlio import load_yaml
 
 FORMAT = "qpretarget.run/1"
 
@@ -168,8 +169,6 @@ class RobotTrajectory:
 
     def make_controller(self):  # noqa: ANN201
         """Rebuild the controller that produced this run from its stored YAML."""
-        import yaml
-
         from .controller import Controller
 
-        return Controller(yaml.safe_load(self.config_yaml))
+        return Controller(load_yaml(self.config_yaml))

@@ -92,6 +92,21 @@ def test_yaml_syntax_error_has_line(tmp_path) -> None:
         Controller.from_yaml(p)
 
 
+def test_yaml_numbers_without_exponent_sign_are_floats(configs_dir, tmp_path) -> None:
+    """PyYAML reads ``1e4`` as a string (YAML 1.1); config files read it as 10000.0."""
+    from qpretarget.yamlio import load_yaml
+
+    assert load_yaml("a: 1e4\nb: 1.5E3\nc: .5\nd: 3\ne: '1e4'\nf: 1.0e-2") == {
+        "a": 1e4, "b": 1500.0, "c": 0.5, "d": 3, "e": "1e4", "f": 0.01,
+    }  # fmt: skip
+    text = (configs_dir / "g1_augmentation.yaml").read_text()
+    p = tmp_path / "g1.yaml"
+    p.write_text(text.replace("eps_abs: 1.0e-9", "eps_abs: 2e-9", 1))
+    assert "eps_abs: 2e-9" in p.read_text()
+    ctrl = Controller.from_yaml(p)
+    assert ctrl.config["solver"]["eps_abs"] == 2e-9
+
+
 def test_missing_file() -> None:
     with pytest.raises(ConfigError, match=r"config file 'nope\.yaml' does not exist"):
         Controller.from_yaml("nope.yaml")

@@ -56,16 +56,15 @@ def demo_controller(robot: str, config: str | None = None):  # noqa: ANN201
     Returns:
         ``(controller, source)`` with ``source`` saying which config was used.
     """
-    import yaml
-
     from ..controller import Controller
     from ..retarget import whole_body_config
+    from ..yamlio import load_yaml
 
     if config is not None:
         return Controller.from_yaml(config), str(config)
     path = CONFIGS / f"{robot}_whole_body.yaml"
     if path.is_file():
-        base = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        base = load_yaml(path.read_text(encoding="utf-8")) or {}
         if (base.get("retarget") or {}).get("support"):
             return Controller.from_yaml(path), str(path)
         cfg = whole_body_config(robot, base=base)

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
+from ..yamlio import load_yaml
 from .human_motion import MotionError
 
 if TYPE_CHECKING:
@@ -379,7 +380,7 @@ def load_keypoint_map(
         raise KeypointMapError(f"key-point map file {str(path)!r} does not exist")
     text = path.read_text(encoding="utf-8")
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text)
     except yaml.YAMLError as exc:
         raise KeypointMapError(f"{path}: invalid YAML: {exc}") from None
     return KeypointMap.from_dict(data, name=path.stem, path=str(path), lines=_key_lines(text))
