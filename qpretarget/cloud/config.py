@@ -25,6 +25,7 @@ from typing import Any
 import yaml
 
 from ..errors import ConfigError, close_matches_hint
+from ..yamlio import load_yaml
 
 
 @dataclass
@@ -82,7 +83,7 @@ class TemplateConfig:
 
 @dataclass
 class CalibrationConfig:
-    """Limb lengths and initial pose from the first frame.
+    r"""Limb lengths and initial pose from the first frame.
 
     Attributes:
         enabled: estimate the segment scales from the first frame (else use ``scales``).
@@ -98,6 +99,21 @@ class CalibrationConfig:
             the personalised model with transferred skinning).
         personalize_distance: observed points farther than this from the fitted template are
             left out (outliers) [m].
+        posture_weight: :math:`\lambda_p` on the squared joint change from the calibration
+            posture (``initial_joints``) while calibrating (0: off).
+        joint_centres: go on estimating where the subject's joint centres sit in the template
+            while tracking (each frame adds what its bent joints show; the calibration frame
+            cannot show a centre's place along a straight limb).
+        centre_joints: joints whose articulation centres are estimated (each names its
+            articulation, e.g. ``left_elbow_joint``); ``null``: every articulation that has
+            one further down its chain (not wrists and ankles).
+        centre_prior: prior standard deviation of a joint centre's offset [m].
+        centre_iterations: joint EM iterations on pose and centres per frame.
+        centre_bound: largest offset of a joint centre [m] (along its limb, or per axis).
+        centre_information: weight of a frame's information on the centres (1: all of it;
+            below 1 discounts the correlated errors of neighbouring points).
+        centre_axes: ``limb``: each articulation's centre moves along its limb only (the line
+            a straight limb does not show); ``free``: in 3-D.
     """
 
     enabled: bool = True
@@ -109,6 +125,14 @@ class CalibrationConfig:
     initial_joints: dict[str, float] = field(default_factory=dict)
     personalize: bool = True
     personalize_distance: float = 0.025
+    posture_weight: float = 1000.0
+    joint_centres: bool = True
+    centre_joints: list[str] | None = None
+    centre_prior: float = 0.1
+    centre_iterations: int = 3
+    centre_bound: float = 0.15
+    centre_information: float = 1.0
+    centre_axes: str = "limb"
 
 
 @dataclass
@@ -123,6 +147,12 @@ class EMConfig:
         tolerance: convergence when every joint moves less than this [rad] (V.C: 0.002).
         temporal_weight: :math:`\lambda_r` of eq. 16 (V.C: 1000) on the squared joint change from
             the previous frame.
+        contact_weight: :math:`\lambda_c` on the squared tilt of each supporting sole (the
+            horizontal part of its normal, :math:`\approx` the tilt in rad): the soles the
+            support tracker marks as supporting lie flat on the floor, as the robot's will
+            (0: off; not in Wang 2017, see ``docs/point_clouds.md``).
+        contact_anchor: the same term also keeps each supporting sole where it was put down
+            (its x, y and heading; 1 cm of slip weighs like 0.1 rad of tilt): no foot slip.
         temporal_reference: ``previous`` (eq. 16: change from the previous frame) or
             ``prediction`` (change from the auto-regressive prediction, which does not lag).
         normal_weight: :math:`\lambda_\perp = \lambda_f` of eq. 15 and 21 (V.C: 0.5).
@@ -154,6 +184,8 @@ class EMConfig:
     tolerance: float = 0.002
     temporal_weight: float = 100.0
     temporal_reference: str = "prediction"
+    contact_weight: float = 1.0e4
+    contact_anchor: bool = True
     normal_weight: float = 0.5
     normal_scale: float = 0.05
     refine_iterations: int = 3
@@ -210,6 +242,7 @@ _CHOICES = {
     ("template", "meshes"): ("visual", "collision"),
     ("template", "skinning"): ("rigid", "lbs"),
     ("em", "estep"): ("kdtree", "dense"),
+    ("calibration", "centre_axes"): ("limb", "free"),
     ("em", "prediction"): ("ar3", "constant"),
     ("em", "temporal_reference"): ("previous", "prediction"),
     ("stability", "mode"): ("qp", "hip_offset", "none"),
@@ -248,6 +281,11 @@ def _section(cls: type, spec: Any, path: str) -> Any:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
                 raise ConfigError(f"must be a number >= 0, got {value!r}.", path=f"{path}.{key}")
             value = float(value)
+        elif key == "centre_joints" and value is not None:
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise ConfigError(
+                    f"must be a list of joint names or null, got {value!r}.", path=f"{path}.{key}"
+                )
         values[key] = value
     return cls(**values)
 
@@ -309,7 +347,7 @@ class CloudConfig:
             raise ConfigError(f"config file {str(path)!r} does not exist.")
         text = path.read_text(encoding="utf-8")
         try:
-            spec = yaml.safe_load(text)
+            spec = load_yaml(text)
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
             where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

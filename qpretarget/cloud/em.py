@@ -43,6 +43,11 @@ lowers :math:`E + \lambda_r E_r` -- eq. 3 itself when :math:`\lambda_r = 0`. Wit
 E-step the k nearest neighbours give the largest truncated sum, so the argument holds for the
 truncated NLL.
 
+**Contact term** (not in the paper): :math:`\lambda_c E_c` keeps the soles the support tracker
+marks as supporting flat on the floor and where they were put down
+(:meth:`CloudRetargeter._contact_residual`); it enters the M-step and the acceptance rule like
+:math:`\lambda_r E_r`, so the monotone objective is :math:`E + \lambda_r E_r + \lambda_c E_c`.
+
 **Refinement** (eq. 15, 21): a few more iterations of EM on position and normal together, i.e. a
 mixture in 6-D with
 :math:`\mathcal N(s; v, \sigma^2)\,\mathcal N(\ell s^\perp; \ell v^\perp, \sigma^2/\lambda_\perp)`,
@@ -95,6 +100,8 @@ from .stability import (
 from .template import PosedTemplate, Template
 
 LOG_2PI = math.log(2.0 * math.pi)
+#: Length [m] dividing a supporting sole's slip in the contact term (``em.contact_weight``).
+CONTACT_LENGTH = 0.1
 #: The calibration uses the dense E-step while sigma is above this [m] (coarse alignment).
 CALIBRATION_DENSE_SIGMA = 0.03
 #: Largest initial sigma of the calibration [m] (the start pose is already roughly aligned).
@@ -415,6 +422,8 @@ class CloudRetargeter:
         lo, hi = self.robot.q_min[qi], self.robot.q_max[qi]
         self._bounded = np.isfinite(lo) & np.isfinite(hi)
         self._sole_ids = {f: self.model.getFrameId(d.frame) for f, d in self.robot.feet.items()}
+        self._contact_data = self.model.createData()
+        self._contact_feet: tuple[str, ...] = ()
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -427,6 +436,7 @@ class CloudRetargeter:
             self.template.set_scales(self._fixed_scales())
         self._hip_memory = HipRuleState()
         self._planted: tuple[str, pin.SE3] | None = None
+        self._anchors: dict[str, tuple[np.ndarray, float]] = {}
         if self.stability_mode != "none":
             self.tracker.reset()
         self._solver.reset()
@@ -451,6 +461,11 @@ class CloudRetargeter:
         raise ConfigError(
             f"must be a number or {{segment: scale}}, got {spec!r}.", path="calibration.scales"
         )
+
+    @property
+    def _estimate_centres(self) -> bool:
+        cal = self.config.calibration
+        return bool(cal.enabled and cal.joint_centres and cal.centre_iterations > 0)
 
     # ------------------------------------------------------------------ helpers
     def _prepare(
@@ -491,10 +506,102 @@ class CloudRetargeter:
         return active
 
     def _prior(self, q: np.ndarray, q_prev: np.ndarray | None) -> float:
-        if q_prev is None or self.config.em.temporal_weight == 0:
-            return 0.0
-        d = q[self._qi] - q_prev[self._qi]
-        return float(self.config.em.temporal_weight * d @ d)
+        r"""Penalties added to the EM objective: :math:`\lambda_r E_r + \lambda_c E_c`."""
+        out = 0.0
+        if q_prev is not None and self.config.em.temporal_weight > 0:
+            d = q[self._qi] - q_prev[self._qi]
+            out += float(self.config.em.temporal_weight * d @ d)
+        if self._contact_feet and self.config.em.contact_weight > 0:
+            r, _ = self._contact_residual(q, jacobian=False)
+            out += float(self.config.em.contact_weight * r @ r)
+        return out
+
+    def _contact_residual(self, q: np.ndarray, *, jacobian: bool) -> tuple[np.ndarray, Any]:
+        r"""Contact residual of the supporting soles and its Jacobian (the term :math:`E_c`).
+
+        For each supporting sole f with world rotation :math:`R_f`, normal :math:`n_f = R_f e_z`
+        and forward axis :math:`x_f = R_f e_x`: the tilt :math:`(n_{f,x}, n_{f,y})` (the sines
+        of its tilt, 0 when it lies flat) and, with ``contact_anchor`` once the sole has an
+        anchor (its fitted place when it was put down), the slip
+        :math:`(p_{f,xy} - a_{f,xy}) / \ell_c` and the heading change
+        :math:`\psi_f - \psi_{a,f}`, :math:`\psi_f = \mathrm{atan2}(x_{f,y}, x_{f,x})`
+        (:data:`CONTACT_LENGTH` :math:`\ell_c`: 1 cm of slip weighs like 0.1 rad of tilt).
+        For a rotation :math:`\omega` of the sole, :math:`\dot n = \omega \times n`, so
+        :math:`\partial n_{xy} / \partial\Delta = -[n]_{\times,xy} J_{f,\omega}`,
+        :math:`\partial \psi / \partial\Delta = (x_x \dot x_y - x_y \dot x_x)/(x_x^2 + x_y^2)`
+        with :math:`\dot x = -[x]_\times J_{f,\omega}`, and the slip's is
+        :math:`J_{f,v,xy} / \ell_c` (sole frame's Jacobian, world axes).
+        """
+        model, data = self.model, self._contact_data
+        feet = self._contact_feet
+        anchors = self._anchors if self.config.em.contact_anchor else {}
+        rows = sum(5 if f in anchors else 2 for f in feet)
+        r = np.zeros(rows)
+        Jr = np.zeros((rows, self.robot.nv)) if jacobian else None
+        if jacobian:
+            pin.computeJointJacobians(model, data, q)
+        else:
+            pin.forwardKinematics(model, data, q)
+        k = 0
+        for f in feet:
+            fid = self._sole_ids[f]
+            M = pin.updateFramePlacement(model, data, fid)
+            n, x = M.rotation[:, 2], M.rotation[:, 0]
+            r[k : k + 2] = n[:2]
+            J = None
+            if Jr is not None:
+                J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+                Jr[k : k + 2] = (-pin.skew(n) @ J[3:])[:2]
+            k += 2
+            if f in anchors:
+                axy, ayaw = anchors[f]
+                r[k : k + 2] = (M.translation[:2] - axy) / CONTACT_LENGTH
+                r[k + 2] = (math.atan2(x[1], x[0]) - ayaw + math.pi) % (2.0 * math.pi) - math.pi
+                if Jr is not None and J is not None:
+                    Jr[k : k + 2] = J[:2] / CONTACT_LENGTH
+                    dx = -pin.skew(x) @ J[3:]
+                    Jr[k + 2] = (x[0] * dx[1] - x[1] * dx[0]) / max(x[0] ** 2 + x[1] ** 2, 1e-12)
+                k += 3
+        return r, Jr
+
+    def _update_anchors(self, q: np.ndarray, support: Support) -> None:
+        """Anchor the soles put down in this frame at their fitted place; free lifted ones."""
+        feet = set(support.feet)
+        self._anchors = {f: a for f, a in self._anchors.items() if f in feet}
+        if not feet - set(self._anchors):
+            return
+        data = self._contact_data
+        pin.framesForwardKinematics(self.model, data, q)
+        for f in feet - set(self._anchors):
+            M = data.oMf[self._sole_ids[f]]
+            x = M.rotation[:, 0]
+            self._anchors[f] = (M.translation[:2].copy(), math.atan2(x[1], x[0]))
+
+    def _add_priors(
+        self,
+        H: np.ndarray,
+        g: np.ndarray,
+        q: np.ndarray,
+        q_prev: np.ndarray | None,
+        sigma2: float,
+    ) -> None:
+        r"""Add the penalties of :meth:`_prior`, linearized at ``q``, to the QP's (nv) block.
+
+        The QP is the M-step objective times :math:`\sigma^2` (:meth:`Template.normal_equations`),
+        so a penalty :math:`\lambda \|r + J\Delta\|^2` adds :math:`2\sigma^2\lambda J^\top J`
+        to H and :math:`2\sigma^2\lambda J^\top r` to g (temporal term: J = I on the joints).
+        """
+        em = self.config.em
+        if q_prev is not None and em.temporal_weight > 0:
+            w = 2.0 * sigma2 * em.temporal_weight
+            H[self._vi, self._vi] += w
+            g[self._vi] += w * (q[self._qi] - q_prev[self._qi])
+        if self._contact_feet and em.contact_weight > 0:
+            r, Jr = self._contact_residual(q, jacobian=True)
+            w = 2.0 * sigma2 * em.contact_weight
+            nv = self.robot.nv
+            H[:nv, :nv] += w * (Jr.T @ Jr)
+            g[:nv] += w * (Jr.T @ r)
 
     def sole_heights(self, q: np.ndarray) -> dict[str, float]:
         """World height of each sole of the fitted (HUMROB) model."""
@@ -518,11 +625,7 @@ class CloudRetargeter:
         nv = self.robot.nv
         qp.H[...] = H
         qp.g[...] = -b
-        if q_prev is not None and em.temporal_weight > 0:
-            w = 2.0 * sigma2 * em.temporal_weight
-            d = q[self._qi] - q_prev[self._qi]
-            qp.H[self._vi, self._vi] += w
-            qp.g[self._vi] += w * d
+        self._add_priors(qp.H, qp.g, q, q_prev, sigma2)
         damp = em.damping * max(float(np.trace(H)) / nv, 1e-12)
         qp.H[np.diag_indices(nv)] += damp
         qp.lb[...] = -np.inf
@@ -674,6 +777,138 @@ class CloudRetargeter:
                 break
         return q, sigma2, nll
 
+    def _centre_stage(
+        self,
+        S: np.ndarray,
+        q: np.ndarray,
+        sigma2: float,
+        q_prev: np.ndarray | None,
+        active: np.ndarray,
+        log: list[IterationLog],
+    ) -> tuple[np.ndarray, float]:
+        r"""EM on the pose and the joint-centre offsets together, then the centres' update.
+
+        The offsets of the articulation centres (:meth:`Template.set_centres`; by default
+        along each limb, ``calibration.centre_axes``, and not for the last articulation of a
+        chain, wrists and ankles, whose short end segment shows them poorly) are static
+        parameters :math:`e` of the subject; frame after frame they get a Gaussian estimate
+        :math:`(\hat e, \Lambda)`
+        (start: 0 and :math:`I/\sigma_e^2`, ``calibration.centre_prior``). Each M-step solves
+        the pose step and the offset step in one QP, the objective gaining
+        :math:`\tfrac12 (e - \hat e)^\top \Lambda (e - \hat e)`; steps are accepted by the
+        rule of :meth:`_em_stage`. Then :math:`\hat e = e` and :math:`\Lambda` gains this
+        frame's information on :math:`e` with the pose marginalized (the Schur complement of
+        the Gauss-Newton matrix, times ``centre_information``): a recursive least-squares
+        estimate over the frames seen, which learns a centre's place along a limb once that
+        joint bends.
+        """
+        cal, em = self.config.calibration, self.config.em
+        T = self.template
+        U = self._centre_basis  # (3A, k): offsets e = U x
+        nv, ne = self.robot.nv, U.shape[1]
+        n = nv + ne
+        if getattr(self, "_qp_centres", None) is None or self._qp_centres.n != n:
+            self._qp_centres = QPProblem(n, self._n_rows)
+            self._solver_centres = make_solver(self.config.solver, path="solver")
+        qp = self._qp_centres
+        e_hat, Lam = self._centre_mean, self._centre_info
+        e = e_hat.copy() if self._centre_x is None else self._centre_x.copy()
+        use_rows = self.stability_mode == "qp"
+        bound = cal.centre_bound
+
+        def apply(ev: np.ndarray) -> None:
+            T.set_centres((U @ ev).reshape(-1, 3))
+
+        def prior_e(ev: np.ndarray) -> float:
+            d = ev - e_hat
+            return 0.5 * float(d @ Lam @ d)
+
+        Hqq = Hqe = Hee = None
+        for _ in range(cal.centre_iterations):
+            posed = T.pose(q)
+            est = e_step(
+                S,
+                posed.points,
+                active,
+                sigma2,
+                em.outlier_weight,
+                mode=em.estep,
+                neighbors=em.neighbors,
+            )
+            J6 = T.joint_jacobians()
+            E = est.Px - est.P1[:, None] * posed.points
+            Hqq, bq = T.normal_equations(posed, J6, est.P1, E)
+            Hqe, Hee, be = T.centre_normal_equations(posed, J6, est.P1, E)
+            Hqe, Hee, be = Hqe @ U, U.T @ Hee @ U, U.T @ be
+            qp.H[:nv, :nv] = Hqq
+            qp.H[:nv, nv:] = Hqe
+            qp.H[nv:, :nv] = Hqe.T
+            qp.H[nv:, nv:] = Hee + sigma2 * Lam
+            qp.g[:nv] = -bq
+            qp.g[nv:] = -be + sigma2 * (Lam @ (e - e_hat))
+            self._add_priors(qp.H, qp.g, q, q_prev, sigma2)
+            qp.H[np.diag_indices(nv)] += em.damping * max(float(np.trace(Hqq)) / nv, 1e-12)
+            qp.lb[...], qp.ub[...] = -np.inf, np.inf
+            vi, qi = self._vi[self._bounded], self._qi[self._bounded]
+            qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
+            qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+            qp.lb[nv:] = np.minimum(-bound - e, 0.0)
+            qp.ub[nv:] = np.maximum(bound - e, 0.0)
+            if self._n_rows:
+                qp.C[...] = 0.0
+                if use_rows and self.rows.support.feet:
+                    C, lo, up = self.rows.rows(q)
+                    qp.C[:, :nv], qp.l[...], qp.u[...] = C, lo, up
+                else:
+                    qp.l[...], qp.u[...] = -np.inf, np.inf
+            sol = self._solver_centres.solve(qp)
+            prior0 = self._prior(q, q_prev) + prior_e(e)
+            obj0 = est.q_value(posed, sigma2) + prior0
+            if sol.x is None or not np.all(np.isfinite(sol.x)):
+                log.append(IterationLog("centres", est.nll, est.nll + prior0, 0.0, 0, sigma2, 0.0))
+                break
+            x = np.clip(sol.x, qp.lb, qp.ub)
+            alpha, halvings, accepted = 1.0, 0, False
+            while True:
+                q_try = self._clip(pin.integrate(self.model, q, alpha * x[:nv]))
+                e_try = np.clip(e + alpha * x[nv:], -bound, bound)
+                apply(e_try)
+                posed_try = T.pose(q_try, jacobians=False)
+                obj = est.q_value(posed_try, sigma2) + self._prior(q_try, q_prev) + prior_e(e_try)
+                if obj <= obj0 and self._stable(q_try):
+                    accepted = True
+                    break
+                if halvings >= max(em.max_backtracks, 1):
+                    break
+                alpha *= 0.5
+                halvings += 1
+            if not accepted:
+                apply(e)
+                log.append(
+                    IterationLog("centres", est.nll, est.nll + prior0, 0.0, halvings, sigma2, 0.0)
+                )
+                break
+            applied = self.model_difference(q, q_try)
+            move = float(np.max(np.abs(applied[self._vi]), initial=0.0))
+            q, e = q_try, e_try
+            sigma2 = max(est.sigma2_update(posed_try), em.sigma2_min)
+            log.append(
+                IterationLog("centres", est.nll, est.nll + prior0, alpha, halvings, sigma2, move)
+            )
+        if Hqq is not None:
+            # This frame's information on the centres, the pose marginalized (at the last
+            # linearization; the temporal term counts as the pose's prior).
+            A = Hqq.copy()
+            if q_prev is not None and em.temporal_weight > 0:
+                A[self._vi, self._vi] += 2.0 * sigma2 * em.temporal_weight
+            A[np.diag_indices(nv)] += em.damping * max(float(np.trace(Hqq)) / nv, 1e-12) + 1e-12
+            info = (Hee - Hqe.T @ np.linalg.solve(A, Hqe)) / sigma2
+            info = 0.5 * (info + info.T)
+            self._centre_info = Lam + cal.centre_information * info
+            self._centre_mean = e.copy()
+        self._centre_x = e.copy()
+        return q, sigma2
+
     def final_nll(self, S: np.ndarray, q: np.ndarray, sigma2: float, active: np.ndarray) -> float:
         """Eq. 3 at ``q`` (same E-step mode as the fit)."""
         em = self.config.em
@@ -724,7 +959,7 @@ class CloudRetargeter:
         """
         cal, em = self.config.calibration, self.config.em
         T = self.template
-        T.set_scales(np.ones(len(T.segment_names)))
+        T.set_scales(np.ones(len(T.segment_names)), np.zeros_like(T.centre_offsets))
         q = self.robot.q_reference.copy()
         posed = T.pose(q, jacobians=False)
         height_model = posed.points[:, 2].max() - posed.points[:, 2].min()
@@ -733,6 +968,7 @@ class CloudRetargeter:
         s = np.full(len(T.segment_names), float(np.clip(height_cloud / height_model, lo_s, hi_s)))
         T.set_scales(s)
         q = self._initial_pose(S)
+        self._calibration_posture = q[self._qi].copy()
         posed = T.pose(q, jacobians=False)
         active = self._active(posed)
         d2 = (
@@ -756,6 +992,23 @@ class CloudRetargeter:
             self.personalized_points = T.personalize(
                 q, S, Sn, ~active, max_distance=cal.personalize_distance
             )
+        # Joint centres: offsets from the calibrated pose, where the fitted surface stays.
+        T.set_centre_rest(q)
+        ax, inner = T.limb_axes()
+        if cal.centre_joints is not None:
+            inner = inner & self._centre_selection(cal.centre_joints)
+        if cal.centre_axes == "limb":
+            U = np.zeros((3 * T.n_centres, T.n_centres))
+            for a in range(T.n_centres):
+                U[3 * a : 3 * a + 3, a] = ax[a]
+            U = U[:, inner]
+        else:
+            U = np.eye(3 * T.n_centres)[:, np.repeat(inner, 3)]
+        self._centre_basis = U
+        self._centre_x = None
+        nc = U.shape[1]
+        self._centre_mean = np.zeros(nc)
+        self._centre_info = np.eye(nc) / max(cal.centre_prior, 1e-9) ** 2
         self.calibration_sigma2 = sigma2
         self.calibrated = True
         return q
@@ -817,6 +1070,10 @@ class CloudRetargeter:
                 Pm = np.eye(K) - 1.0 / K
                 H[nv:, nv:] += 2 * sigma2 * cal.scale_prior * Pm
                 b[nv:] -= 2 * sigma2 * cal.scale_prior * Pm @ s
+            if cal.posture_weight > 0:
+                w = 2.0 * sigma2 * cal.posture_weight
+                H[self._vi, self._vi] += w
+                b[self._vi] -= w * (q[self._qi] - self._calibration_posture)
             H[np.diag_indices(nv + ns)] += em.damping * max(np.trace(H) / (nv + ns), 1e-12) + 1e-12
             qp.H[...], qp.g[...] = H, -b
             qp.lb[...], qp.ub[...] = -np.inf, np.inf
@@ -829,14 +1086,15 @@ class CloudRetargeter:
                 break
             x = sol.x
             ds = np.full(K, x[nv]) if common else x[nv:]
-            obj0 = est.q_value(posed, sigma2) + self._scale_prior(s)
+            obj0 = est.q_value(posed, sigma2) + self._scale_prior(s) + self._posture_prior(q)
             alpha = 1.0
             for _ in range(max(em.max_backtracks, 1)):
                 s_try = np.clip(s + alpha * ds, lo_s, hi_s)
                 T.set_scales(s_try)
                 q_try = self._clip(pin.integrate(self.model, q, alpha * x[:nv]))
                 p_try = T.pose(q_try, jacobians=False)
-                if est.q_value(p_try, sigma2) + self._scale_prior(s_try) <= obj0:
+                obj = est.q_value(p_try, sigma2) + self._scale_prior(s_try)
+                if obj + self._posture_prior(q_try) <= obj0:
                     break
                 alpha *= 0.5
             else:
@@ -852,6 +1110,37 @@ class CloudRetargeter:
                 break
         T.set_scales(s)
         return q, s, sigma2
+
+    def _centre_selection(self, names: list[str]) -> np.ndarray:
+        """(A,) mask of the articulations holding one of the joints ``names``."""
+        T = self.template
+        groups = [{T.model.names[int(j)] for j in g} for g in T.articulations]
+        mask = np.zeros(T.n_centres, bool)
+        for k, name in enumerate(names):
+            self.robot.joint_index(name, path=f"calibration.centre_joints[{k}]")
+            hit = [a for a, g in enumerate(groups) if name in g]
+            if not hit:
+                firsts = ", ".join(sorted(T.model.names[int(g.max())] for g in T.articulations))
+                raise ConfigError(
+                    f"joint {name!r} starts no articulation of the template; articulations "
+                    f"start at: {firsts}.",
+                    path=f"calibration.centre_joints[{k}]",
+                )
+            mask[hit] = True
+        return mask
+
+    def _posture_prior(self, q: np.ndarray) -> float:
+        r"""Calibration posture term :math:`\lambda_p \|\theta - \theta_{cal}\|^2`.
+
+        The person stands in the posture the calibration asks for (``initial_joints``); what the
+        cloud barely shows (a leg's twist about its own axis, seen only through the small feet)
+        stays there instead of drifting. Not in Wang 2017.
+        """
+        w = self.config.calibration.posture_weight
+        if w <= 0:
+            return 0.0
+        d = q[self._qi] - self._calibration_posture
+        return float(w * d @ d)
 
     def _scale_prior(self, s: np.ndarray) -> float:
         w = self.config.calibration.scale_prior
@@ -946,8 +1235,10 @@ class CloudRetargeter:
                 q_prev = q.copy()
         status = "ok"
         support = Support()
+        self._contact_feet = ()
         if self.stability_mode != "none":
             support = self.tracker.update(self.sole_heights(q))
+            self._contact_feet = tuple(support.feet)
             self.rows.set_support(support, q)
             if self.stability_mode == "qp":
                 q, ok = self._restore_balance(q)
@@ -967,6 +1258,8 @@ class CloudRetargeter:
             q, sigma2, _ = self._em_stage(
                 f"linear{p + 1}", S, Sn, q, sigma2, q_prev, active, em.max_iterations, log
             )
+        if self._estimate_centres and q_prev is not None:
+            q, sigma2 = self._centre_stage(S, q, sigma2, q_prev, active, log)
         nll = self.final_nll(S, q, sigma2, active)
         if em.refine_iterations and Sn is not None:
             q, sigma2, _ = self._em_stage(
@@ -977,6 +1270,8 @@ class CloudRetargeter:
             self.rows.set_support(support, q)
             q, rule = hip_offset_rule(self.rows, q, self._hips, self._hip_memory)
         q_robot = self.robot_configuration(q, support)
+        if self.stability_mode != "none":
+            self._update_anchors(q, support)
         margin = np.nan
         if self.stability_mode != "none" and support.feet:
             self.rows.set_support(support, q)
@@ -1061,6 +1356,10 @@ class CloudRetargeter:
             "cloud/q_fit": np.array([r.q_fit for r in results]),
             "cloud/scales": self.template.scales.copy(),
             "cloud/segment_names": np.array(self.template.segment_names, dtype=str),
+            "cloud/centres": self.template.centres(),
+            "cloud/centre_joints": np.array(
+                [self.model.names[int(g.max())] for g in self.template.articulations], dtype=str
+            ),
             "cloud/sigma2": np.array([r.sigma2 for r in results]),
             "cloud/nll": np.array([r.nll for r in results]),
             "cloud/iterations": np.array([r.iterations for r in results]),

@@ -313,10 +313,31 @@ class HumanPoser:
     Targets are always reachable in length, so the limb directions are the clip's wherever the
     model's joint limits allow.
 
+    The clip's key-points determine neither the clavicles (where the shoulders sit on the thorax:
+    each elbow target moves with the current shoulder, so raising a clavicle costs the limb
+    tasks nothing) nor how a trunk bend is shared between the lumbar and thoracic joints. With
+    the weak posture pull of the other joints these drift: on CMU 14_37 the drinking side's
+    clavicle rose by 0.86 rad (the shoulder 16 cm up) and the spine took an S shape (lumbar
+    -0.7, thoracic +0.7 rad) while the clip's shoulders stay still on its torso. The
+    :attr:`HELD_JOINTS` get the posture weight ``held_weight`` instead, which keeps them within
+    0.03 rad of neutral on that clip and changes the limb directions by less than 0.2 deg.
+
     Args:
         ticks_per_frame: controller ticks per clip frame (more: closer convergence).
         first_frame_ticks: ticks for the first frame (starting from the neutral pose).
+        held_weight: posture weight of :attr:`HELD_JOINTS` (the other joints: 1e-3).
     """
+
+    #: Joints the clip does not determine (clavicles, trunk), held near neutral (see above).
+    HELD_JOINTS: tuple[str, ...] = (
+        "left_clavicle_joint_X",
+        "right_clavicle_joint_X",
+        "middle_lumbar_Z",
+        "middle_lumbar_X",
+        "middle_thoracic_Z",
+        "middle_thoracic_X",
+        "middle_thoracic_Y",
+    )
 
     CHAINS: tuple[tuple[str, str], ...] = tuple(
         (c, p)
@@ -324,7 +345,9 @@ class HumanPoser:
         if p not in ("waist", "neck") and c not in ("neck", "head")
     )
 
-    def __init__(self, *, ticks_per_frame: int = 8, first_frame_ticks: int = 80) -> None:
+    def __init__(
+        self, *, ticks_per_frame: int = 8, first_frame_ticks: int = 80, held_weight: float = 0.1
+    ) -> None:
         from ..controller import Controller
         from ..motion import load_keypoint_map
 
@@ -361,7 +384,14 @@ class HumanPoser:
                     "orientation_weight": 3.0 if name == "waist" else 1.0,
                 }
             )
-        tasks.append({"type": "posture", "name": "posture", "weight": 1e-3})
+        tasks.append(
+            {
+                "type": "posture",
+                "name": "posture",
+                "weight": {j: float(held_weight) for j in self.HELD_JOINTS},
+                "default_weight": 1e-3,
+            }
+        )
         self.config = {
             "name": "human_description_ik",
             "robot": {"urdf": HUMAN_URDF, "free_flyer": True},
@@ -502,7 +532,8 @@ def human_clip_sequence(
     """The human model posed by a clip, rendered by a Kinect-like camera in front of it.
 
     The sequence starts with the calibration posture (standing upright facing the camera, arms
-    abducted by ``arm_abduction`` [rad], at the clip's first position and heading), then
+    abducted by ``arm_abduction`` [rad], feet centred where the clip's first frame has them,
+    facing the clip's first heading), then
     ``calibration_frames`` frames interpolating to the clip's first pose, then the clip. The
     floor is put at z = 0 under the lowest point of the first frame.
 
@@ -530,6 +561,11 @@ def human_clip_sequence(
     qa[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.0, 0.0, yaw) @ HUMAN_TO_Z_UP).coeffs()
     for side in ("left", "right"):
         qa[h.joint_q_index[h.joint_index(f"{side}_shoulder_X")]] = arm_abduction
+    # The person calibrates standing where the clip starts: the feet's midpoint is the clip's
+    # (a pelvis-centred stance would slide both feet up to 15 cm while moving into the clip).
+    here, there = poser.model_keypoints(qa), poser.model_keypoints(Q[0])
+    mid = [0.5 * (k["left_ankle"] + k["right_ankle"])[:2] for k in (here, there)]
+    qa[:2] += mid[1] - mid[0]
     n = int(calibration_frames)
     lead = [pin.interpolate(h.model, qa, Q[0], a) for a in np.linspace(0.0, 1.0, n + 2)[:-1]]
     Qall = np.array(lead + list(Q))

@@ -197,20 +197,11 @@ class StabilityRows:
         if not support.feet:
             self.normals, self.offsets, self.hull = np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2))
             return
-        self._kinematics(q, False)
-        MF = self.data.oMf[self._sole_ids[support.primary]]  # type: ignore[index]
-        pts = []
-        for f in support.feet:
-            x0, x1, y0, y1 = self.robot.feet[f].rectangle
-            local = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
-            M = self.data.oMf[self._sole_ids[f]]
-            world = local @ M.rotation.T + M.translation
-            pts.append(((world - MF.translation) @ MF.rotation)[:, :2])
-        self.hull = convex_hull_2d(np.concatenate(pts))
+        self.hull = self._hull(q)
         n, o = polygon_halfplanes(self.hull, 0.0)
         self.full_normals, self.full_offsets = n, o
         self.centre, self.radius = chebyshev_centre(n, o)
-        margin = min(self.margin, 0.9 * self.radius)
+        margin = self._margin = min(self.margin, 0.9 * self.radius)
         if self.region == "polygon":
             self.normals, self.offsets = n, o - margin
         else:
@@ -225,16 +216,54 @@ class StabilityRows:
                 f"the support polygon has {len(self.normals)} edges, more than {self.n_rows} rows."
             )
 
+    def _hull(self, q: np.ndarray) -> np.ndarray:
+        """Convex hull (K, 2) of the supporting soles in the primary sole frame at ``q``."""
+        self._kinematics(q, False)
+        MF = self.data.oMf[self._sole_ids[self.support.primary]]  # type: ignore[index]
+        pts = []
+        for f in self.support.feet:
+            x0, x1, y0, y1 = self.robot.feet[f].rectangle
+            local = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+            M = self.data.oMf[self._sole_ids[f]]
+            world = local @ M.rotation.T + M.translation
+            pts.append(((world - MF.translation) @ MF.rotation)[:, :2])
+        return convex_hull_2d(np.concatenate(pts))
+
+    def _refresh(self, q: np.ndarray) -> None:
+        """Rebuild the polygon of a double support at ``q``.
+
+        The margin and, for ``inscribed_circle``, the disc stay those of :meth:`set_support`.
+        """
+        if len(self.support.feet) < 2:
+            return
+        self.hull = self._hull(q)
+        n, o = polygon_halfplanes(self.hull, 0.0)
+        self.full_normals, self.full_offsets = n, o
+        if self.region == "polygon" and len(n) <= self.n_rows:
+            self.normals, self.offsets = n, o - self._margin
+
     def margin_of(self, q: np.ndarray, *, full: bool = False) -> float:
-        """Signed distance [m] of the projected CoM inside the region (``full``: unshrunk SP)."""
+        """Signed distance [m] of the projected CoM inside the region (``full``: unshrunk SP).
+
+        ``full`` rebuilds the polygon at ``q`` first (the other soles move with the joints);
+        otherwise the region is the one of the last :meth:`rows` (the linearization point).
+        """
         if not self.support.feet:
             return np.inf
+        if full:
+            self._refresh(q)
         cF, _ = self.com_in_sole(q)
         n, o = (self.full_normals, self.full_offsets) if full else (self.normals, self.offsets)
         return float(np.min(o - n @ cF[:2]))
 
     def rows(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        r"""Rows ``(C, l, u)``: :math:`n_k^\top J_{F,xy} \Delta \le o_k - n_k^\top c_{F,xy}`."""
+        r"""Rows ``(C, l, u)``: :math:`n_k^\top J_{F,xy} \Delta \le o_k - n_k^\top c_{F,xy}`.
+
+        The region is rebuilt at ``q`` first: in a double support the second sole's corners
+        move with the leg joints, and a region kept from the frame's start let the CoM end up
+        to a few mm outside the support polygon of the fitted pose.
+        """
+        self._refresh(q)
         self.C[...] = 0.0
         self.u[...] = np.inf
         k = len(self.normals)

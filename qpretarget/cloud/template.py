@@ -186,6 +186,40 @@ def segments_of_joints(robot: RobotModel) -> tuple[np.ndarray, tuple[str, ...]]:
     return seg, tuple(names)
 
 
+#: Joints within this distance of an articulation's first joint move with it [m, robot scale].
+ARTICULATION_RADIUS = 0.07
+
+
+def articulations(robot: RobotModel, seg_of_joint: np.ndarray) -> list[np.ndarray]:
+    """Joint groups whose common centre the template may move (one per segment start).
+
+    An articulation is the first joint of a segment (:func:`segments_of_joints`) with the joints
+    just above it in the chain whose centres, at the reference posture, are within
+    :data:`ARTICULATION_RADIUS` of it (e.g. G1's shoulder pitch and roll, 4 cm apart; hip pitch
+    and roll; the three waist joints). A free-flyer root is never part of one.
+    """
+    model = robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, robot.q_reference)
+    first = 2 if robot.free_flyer else 1
+    par = model.parents
+    out = []
+    for j in range(first, model.njoints):
+        if model.joints[j].nv == 0 or seg_of_joint[j] == seg_of_joint[par[j]]:
+            continue
+        group = [j]
+        i = par[j]
+        while i >= first and model.joints[i].nv > 0 and seg_of_joint[i] == seg_of_joint[par[i]]:
+            if np.linalg.norm(data.oMi[i].translation - data.oMi[j].translation) > (
+                ARTICULATION_RADIUS
+            ):
+                break
+            group.append(i)
+            i = par[i]
+        out.append(np.array(sorted(group), dtype=int))
+    return out
+
+
 class Template:
     """HUMROB template: sampled surface points on the robot's links, scalable per segment.
 
@@ -248,6 +282,20 @@ class Template:
         )
         self._frame_t0 = np.array([f.placement.translation.copy() for f in model0.frames])
         self._frame_seg = np.array([self.seg_of_joint[f.parentJoint] for f in model0.frames])
+        self._frame_joint = np.array([f.parentJoint for f in model0.frames])
+        # Frames at their joint's origin (the joint and its body frame) mark the joint centre and
+        # move with it; the others (soles, hands, sensors) keep their place on the surface.
+        self._frame_at_joint = np.linalg.norm(self._frame_t0, axis=1) < 1e-12
+        # Joint orientations at the rest configuration of the centre offsets (neutral until
+        # set_centre_rest): the surface does not move at that configuration when a centre does.
+        data0 = model0.createData()
+        pin.forwardKinematics(model0, data0, pin.neutral(model0))
+        self._R0 = np.array([M.rotation.copy() for M in data0.oMi])
+        self.articulations = articulations(robot, self.seg_of_joint)
+        self._articulation_of_joint = np.full(model0.njoints, -1)
+        for a, group in enumerate(self.articulations):
+            self._articulation_of_joint[group] = a
+        self.centre_offsets = np.zeros((model0.njoints, 3))
         self.model = pin.Model(model0)
         self.data = self.model.createData()
         # Ancestor matrix: A[j, i] = 1 when joint i is j or one of its ancestors (i >= 1).
@@ -340,21 +388,95 @@ class Template:
         return len(self.points0)
 
     # ------------------------------------------------------------------ scaling
-    def set_scales(self, scales: np.ndarray) -> None:
-        """Apply segment scales (K,) to the model's joint/frame placements and to the points."""
+    def set_scales(self, scales: np.ndarray, centre_offsets: np.ndarray | None = None) -> None:
+        r"""Apply segment scales (K,) and joint-centre offsets to the model and the points.
+
+        ``centre_offsets`` (njoints, 3) (default: the current ones) moves the centre of joint
+        :math:`j` by :math:`e_j` (world axes of the rest configuration, :meth:`set_centre_rest`,
+        neutral by default) while the surface stays where it is at that configuration: with
+        :math:`R^0_j` the joint's world orientation there and :math:`\pi(j)` its parent,
+
+        .. math::
+            t_j = s_{k(\pi(j))}\, t^0_j + R^{0\top}_{\pi(j)} (e_j - e_{\pi(j)}),\qquad
+            v^{loc}_m = s_{k(j)}\, v^0_m - R^{0\top}_j e_j .
+        """
         s = np.asarray(scales, float).copy()
         if s.shape != (len(self.segment_names),) or np.any(s <= 0):
             raise ConfigError(
                 f"scales must be {len(self.segment_names)} positive numbers, got {scales!r}."
             )
+        if centre_offsets is not None:
+            e = np.asarray(centre_offsets, float)
+            if e.shape != self.centre_offsets.shape:
+                raise ConfigError(
+                    f"centre offsets must be ({self.model.njoints}, 3), got {e.shape}."
+                )
+            self.centre_offsets = e.copy()
+        e = self.centre_offsets
         self.scales = s
+        R0, par = self._R0, self._parents
         for j in range(1, self.model.njoints):
-            self.model.jointPlacements[j].translation = self._t0[j] * s[self._seg_t[j]]
+            self.model.jointPlacements[j].translation = self._t0[j] * s[self._seg_t[j]] + R0[
+                par[j]
+            ].T @ (e[j] - e[par[j]])
+        ej_loc = np.einsum("jba,jb->ja", R0, e)  # R0_j^T e_j
         for f in range(len(self.model.frames)):
-            self.model.frames[f].placement.translation = self._frame_t0[f] * s[self._frame_seg[f]]
+            t = self._frame_t0[f] * s[self._frame_seg[f]]
+            if not self._frame_at_joint[f]:
+                t = t - ej_loc[self._frame_joint[f]]
+            self.model.frames[f].placement.translation = t
         self.data = self.model.createData()
-        self.local = self.points0 * s[self.point_segment][:, None]
+        self.local = self.points0 * s[self.point_segment][:, None] - ej_loc[self.joint]
         self._setup_blend()
+
+    def set_centre_rest(self, q: np.ndarray) -> None:
+        """Make ``q`` the configuration at which moving a joint centre leaves the surface in place.
+
+        The calibration sets it to the calibrated pose: the surface fitted there stays, and a
+        centre offset shows only where a joint bends away from its calibration angle. Resets
+        the centre offsets to zero.
+        """
+        pin.forwardKinematics(self.model, self.data, np.asarray(q, float))
+        self._R0 = np.array([M.rotation.copy() for M in self.data.oMi])
+        self._p0 = np.array([M.translation.copy() for M in self.data.oMi])
+        self.set_scales(self.scales, np.zeros_like(self.centre_offsets))
+
+    def limb_axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Unit limb direction through each articulation at the rest configuration (A, 3).
+
+        From the articulation's first joint towards the mean of the next articulations down the
+        tree (elbow -> wrist); for the last of a chain, from the previous one (elbow -> wrist
+        for the wrist). Along this line a straight limb does not show its centres.
+
+        Returns:
+            The directions and (A,) booleans: True where an articulation lies further down
+            the tree (False for the last of a chain: wrists, ankles).
+        """
+        p0 = getattr(self, "_p0", None)
+        if p0 is None:
+            self.set_centre_rest(pin.neutral(self.model))
+            p0 = self._p0
+        art, par = self._articulation_of_joint, self._parents
+        first = [int(g.max()) for g in self.articulations]  # the segment's own joint
+        up = []
+        for j in first:
+            i = int(par[min(self.articulations[art[j]])])
+            while i > 0 and art[i] < 0:
+                i = int(par[i])
+            up.append(i)
+        out = np.zeros((self.n_centres, 3))
+        inner = np.zeros(self.n_centres, bool)
+        for a, j in enumerate(first):
+            below = [b for b, u in enumerate(up) if u > 0 and art[u] == a]
+            inner[a] = bool(below)
+            if below:
+                d = np.mean([p0[first[b]] for b in below], axis=0) - p0[j]
+            elif up[a] > 0:
+                d = p0[j] - p0[first[art[up[a]]]]
+            else:
+                d = np.array([0.0, 0.0, 1.0])
+            out[a] = d / max(np.linalg.norm(d), 1e-12)
+        return out, inner
 
     def _setup_blend(self) -> None:
         """Blend weights and parent-frame coordinates of the LBS points (reference posture)."""
@@ -416,7 +538,10 @@ class Template:
         nloc = np.einsum("kba,kb->ka", R, normals[ok])
         seg = self.seg_of_joint[j]
         kept = np.flatnonzero(keep)
-        self.points0 = np.concatenate([self.points0[kept], local / self.scales[seg][:, None]])
+        ej = np.einsum("kba,kb->ka", self._R0[j], self.centre_offsets[j])
+        self.points0 = np.concatenate(
+            [self.points0[kept], (local + ej) / self.scales[seg][:, None]]
+        )
         self.normals0 = np.concatenate([self.normals0[kept], nloc])
         self.joint = np.concatenate([self.joint[kept], j])
         self.link = np.concatenate([self.link[kept], self.link[src]])
@@ -572,6 +697,73 @@ class Template:
         out[np.arange(self.n_points), :, self.point_segment] += own
         return out
 
+    # ------------------------------------------------------------------ joint centres
+    @property
+    def n_centres(self) -> int:
+        """Number of articulations whose centre can move (3 offset coordinates each)."""
+        return len(self.articulations)
+
+    def centres(self) -> np.ndarray:
+        """(A, 3) offsets of the articulations' centres (rest-configuration world axes) [m]."""
+        return np.array([self.centre_offsets[g[0]] for g in self.articulations]).reshape(-1, 3)
+
+    def set_centres(self, offsets: np.ndarray) -> None:
+        """Move every articulation's joints by its offset (A, 3); the scales stay."""
+        x = np.asarray(offsets, float).reshape(-1, 3)
+        e = np.zeros_like(self.centre_offsets)
+        for a, group in enumerate(self.articulations):
+            e[group] = x[a]
+        self.set_scales(self.scales, e)
+
+    def centre_jacobian_blocks(self, posed: PosedTemplate) -> np.ndarray:
+        r"""(J, 3, 3A) derivative of the points of each used joint w.r.t. the centre offsets.
+
+        The offsets enter linearly at fixed joint angles; for a point of joint :math:`j` (rigid)
+        and every joint :math:`i` on the path from the root to :math:`j`,
+
+        .. math:: \frac{\partial v_m}{\partial e_i} = R_{\pi(i)} R^{0\top}_{\pi(i)}
+            - R_i R^{0\top}_i ,
+
+        zero while joint :math:`i` is at its rest angle: a joint centre is seen only when the
+        joint bends. The joints of an articulation share one offset (their terms add up). The
+        derivative is the same for all points of a joint.
+        """
+        R, R0, par = posed.R, self._R0, self._parents
+        art = self._articulation_of_joint
+        out = np.zeros((len(self.used_joints), 3, 3 * self.n_centres))
+        for g, j in enumerate(self.used_joints):
+            i = int(j)
+            while i > 0:
+                a = art[i]
+                if a >= 0:
+                    p = par[i]
+                    out[g, :, 3 * a : 3 * a + 3] += R[p] @ R0[p].T - R[i] @ R0[i].T
+                i = int(par[i])
+        return out
+
+    def centre_normal_equations(
+        self, posed: PosedTemplate, J6: np.ndarray, P1: np.ndarray, E: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        r"""Blocks of the Gauss-Newton system in the centre offsets (rigid template).
+
+        Returns ``H_qe`` (nv, 3C), ``H_ee`` (3C, 3C) and ``b_e`` (3C,): with :math:`D_j` the
+        points' common derivative (:meth:`centre_jacobian_blocks`), :math:`w_j = \sum P_m`,
+        :math:`c_j = \sum P_m r_m` and :math:`f_j = \sum e_m` over the points of joint j,
+        :math:`H_{ee} = \sum_j w_j D_j^\top D_j`, :math:`b_e = \sum_j D_j^\top f_j`,
+        :math:`H_{qe} = \sum_j (w_j J_{j,lin} - [c_j]_\times J_{j,ang})^\top D_j`.
+        LBS points count with their own joint only (an approximation; the step is checked).
+        """
+        D = self.centre_jacobian_blocks(posed)
+        g, nJ = self._group, len(self.used_joints)
+        w0 = np.bincount(g, P1, nJ)
+        c = np.stack([np.bincount(g, P1 * posed.offsets[:, a], nJ) for a in range(3)], 1)
+        f = np.stack([np.bincount(g, E[:, a], nJ) for a in range(3)], 1)
+        A = w0[:, None, None] * J6[:, :3] - np.matmul(skew_batch(c), J6[:, 3:])  # (J, 3, nv)
+        H_qe = np.einsum("jan,jac->nc", A, D)
+        H_ee = np.einsum("j,jac,jad->cd", w0, D, D)
+        b_e = np.einsum("jac,ja->c", D, f)
+        return H_qe, H_ee, b_e
+
     def __repr__(self) -> str:
         sc = ", ".join(f"{n}={s:.3f}" for n, s in zip(self.segment_names, self.scales, strict=True))
         return (
@@ -580,4 +772,4 @@ class Template:
         )
 
 
-__all__ = ["PosedTemplate", "Template", "segments_of_joints", "skew_batch"]
+__all__ = ["PosedTemplate", "Template", "articulations", "segments_of_joints", "skew_batch"]

@@ -36,6 +36,7 @@ def test_retarget_cloud_writes_a_run(tmp_path, clouds, g1, capsys):
     assert run.q.shape == (3, g1.nq) and run.joint_names == g1.joint_names
     assert run.contacts.shape == (3, 2) and run.contacts.any(axis=1).all()
     assert "cloud/q_fit" in run.extra and run.meta["command"] == "retarget-cloud"
+    assert run.extra["cloud/centres"].shape == (len(run.extra["cloud/centre_joints"]), 3)
     # The stored config rebuilds a controller (evaluate and view rely on it).
     assert run.make_controller().robot.nq == g1.nq
     # The robot stands on its primary sole: one sole at z = 0 in every frame (1e-9 m).

@@ -117,3 +117,47 @@ def test_scale_jacobian_and_scaled_kinematics(small, posture):
     P1 = T.pose(posture, jacobians=False)
     root = posture[:3]
     assert np.allclose(P2.points - root, 2.0 * (P1.points - root), atol=1e-12)
+
+
+def test_joint_centre_offsets(g1, g1_meshes, posture):
+    """Moving articulation centres keeps the surface at the rest pose; Jacobian and sums exact."""
+    T = Template(g1, n_points=600, meshes=g1_meshes)
+    names = [[T.model.names[int(j)] for j in g] for g in T.articulations]
+    assert ["left_shoulder_pitch_joint", "left_shoulder_roll_joint"] in names
+    assert ["left_elbow_joint"] in names and ["left_knee_joint"] in names
+    rng = np.random.default_rng(3)
+    T.set_scales(rng.uniform(0.9, 1.4, len(T.scales)))
+    rest = posture.copy()
+    T.set_centre_rest(rest)
+    before = T.pose(rest, jacobians=False).points
+    x = rng.normal(0.0, 0.05, (T.n_centres, 3))
+    T.set_centres(x)
+    assert np.allclose(T.centres(), x)
+    assert np.abs(T.pose(rest, jacobians=False).points - before).max() < 1e-12
+    # Limb axes: unit, the elbow's points from the elbow to the wrist.
+    axes, inner = T.limb_axes()
+    assert np.allclose(np.linalg.norm(axes, axis=1), 1.0)
+    assert not inner[names.index(["left_wrist_pitch_joint", "left_wrist_yaw_joint"])]
+    a = names.index(["left_elbow_joint"])
+    assert inner[a]
+    q = g1.q_reference.copy()
+    q[7:] += rng.normal(0.0, 0.4, g1.nv - 6)
+    posed = T.pose(q)
+    D = T.centre_jacobian_blocks(posed)[T._group]
+    h = 1e-6
+    for c in rng.choice(3 * T.n_centres, size=8, replace=False):
+        xx = x.reshape(-1).copy()
+        xx[c] += h
+        T.set_centres(xx)
+        num = (T.pose(q, jacobians=False).points - posed.points) / h
+        assert np.abs(num - D[:, :, c]).max() < 1e-6
+    T.set_centres(x)
+    P1 = rng.uniform(0.0, 1.0, T.n_points)
+    E = rng.normal(size=(T.n_points, 3))
+    posed = T.pose(q)
+    J6 = T.joint_jacobians()
+    Hqe, Hee, be = T.centre_normal_equations(posed, J6, P1, E)
+    Jm = T.point_jacobians(posed, J6)
+    assert np.allclose(Hqe, np.einsum("m,man,mac->nc", P1, Jm, D), atol=1e-9)
+    assert np.allclose(Hee, np.einsum("m,mac,mad->cd", P1, D, D), atol=1e-9)
+    assert np.allclose(be, np.einsum("mac,ma->c", D, E), atol=1e-9)
