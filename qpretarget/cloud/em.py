@@ -423,6 +423,7 @@ class CloudRetargeter:
         self._bounded = np.isfinite(lo) & np.isfinite(hi)
         self._sole_ids = {f: self.model.getFrameId(d.frame) for f, d in self.robot.feet.items()}
         self._contact_data = self.model.createData()
+        self._qp_centres: QPProblem | None = None  # built at the first centre stage
         self._contact_feet: tuple[str, ...] = ()
         self.reset()
 
@@ -611,6 +612,34 @@ class CloudRetargeter:
         }
 
     # ------------------------------------------------------------------ the QP step
+    def _joint_step_bounds(self, qp: QPProblem, q: np.ndarray) -> np.ndarray:
+        r"""Set the step's bounds (eq. 17); return the bounded joints' tangent indices.
+
+        :math:`\theta_{min} - \theta \le \Delta \le \theta_{max} - \theta` on the bounded
+        joints (widened to 0 where ``q`` is outside), none on the other variables.
+        """
+        vi, qi = self._vi[self._bounded], self._qi[self._bounded]
+        qp.lb[...], qp.ub[...] = -np.inf, np.inf
+        qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
+        qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+        return vi
+
+    def _e_step(
+        self, S: np.ndarray, posed: PosedTemplate, active: np.ndarray, sigma2: float, **extra: Any
+    ) -> EStep:
+        """:func:`e_step` with the fit's ``em.outlier_weight``, ``estep`` and ``neighbors``."""
+        em = self.config.em
+        return e_step(
+            S,
+            posed.points,
+            active,
+            sigma2,
+            em.outlier_weight,
+            mode=em.estep,
+            neighbors=em.neighbors,
+            **extra,
+        )
+
     def _solve_step(
         self,
         H: np.ndarray,
@@ -628,12 +657,7 @@ class CloudRetargeter:
         self._add_priors(qp.H, qp.g, q, q_prev, sigma2)
         damp = em.damping * max(float(np.trace(H)) / nv, 1e-12)
         qp.H[np.diag_indices(nv)] += damp
-        qp.lb[...] = -np.inf
-        qp.ub[...] = np.inf
-        vi = self._vi[self._bounded]
-        qi = self._qi[self._bounded]
-        qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
-        qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+        vi = self._joint_step_bounds(qp, q)
         if self._n_rows:
             if with_rows and self.rows.support.feet:
                 C, lo, up = self.rows.rows(q)
@@ -666,10 +690,7 @@ class CloudRetargeter:
             qp.H[...] = np.eye(nv)
             qp.H[:6, :6] *= 1e3  # balance by the joints, not by moving the (free) base
             qp.g[...] = 0.0
-            vi, qi = self._vi[self._bounded], self._qi[self._bounded]
-            qp.lb[...], qp.ub[...] = -np.inf, np.inf
-            qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
-            qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+            self._joint_step_bounds(qp, q)
             C, lo, up = self.rows.rows(q)
             qp.C[...], qp.l[...], qp.u[...] = C, lo, up
             sol = self._solver_restore.solve(qp)
@@ -707,14 +728,11 @@ class CloudRetargeter:
                 moved = float(np.max(np.abs(posed.points[active] - ref)))
                 if moved > em.neighbor_refresh * math.sqrt(sigma2):
                     pairs = None
-            est = e_step(
+            est = self._e_step(
                 S,
-                posed.points,
+                posed,
                 active,
                 sigma2,
-                em.outlier_weight,
-                mode=em.estep,
-                neighbors=em.neighbors,
                 Sn=Sn if lam > 0 else None,
                 Vn=posed.normals if lam > 0 else None,
                 normal_weight=lam,
@@ -807,7 +825,7 @@ class CloudRetargeter:
         U = self._centre_basis  # (3A, k): offsets e = U x
         nv, ne = self.robot.nv, U.shape[1]
         n = nv + ne
-        if getattr(self, "_qp_centres", None) is None or self._qp_centres.n != n:
+        if self._qp_centres is None or self._qp_centres.n != n:
             self._qp_centres = QPProblem(n, self._n_rows)
             self._solver_centres = make_solver(self.config.solver, path="solver")
         qp = self._qp_centres
@@ -826,15 +844,7 @@ class CloudRetargeter:
         Hqq = Hqe = Hee = None
         for _ in range(cal.centre_iterations):
             posed = T.pose(q)
-            est = e_step(
-                S,
-                posed.points,
-                active,
-                sigma2,
-                em.outlier_weight,
-                mode=em.estep,
-                neighbors=em.neighbors,
-            )
+            est = self._e_step(S, posed, active, sigma2)
             J6 = T.joint_jacobians()
             E = est.Px - est.P1[:, None] * posed.points
             Hqq, bq = T.normal_equations(posed, J6, est.P1, E)
@@ -848,10 +858,7 @@ class CloudRetargeter:
             qp.g[nv:] = -be + sigma2 * (Lam @ (e - e_hat))
             self._add_priors(qp.H, qp.g, q, q_prev, sigma2)
             qp.H[np.diag_indices(nv)] += em.damping * max(float(np.trace(Hqq)) / nv, 1e-12)
-            qp.lb[...], qp.ub[...] = -np.inf, np.inf
-            vi, qi = self._vi[self._bounded], self._qi[self._bounded]
-            qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
-            qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+            self._joint_step_bounds(qp, q)
             qp.lb[nv:] = np.minimum(-bound - e, 0.0)
             qp.ub[nv:] = np.maximum(bound - e, 0.0)
             if self._n_rows:
@@ -911,17 +918,7 @@ class CloudRetargeter:
 
     def final_nll(self, S: np.ndarray, q: np.ndarray, sigma2: float, active: np.ndarray) -> float:
         """Eq. 3 at ``q`` (same E-step mode as the fit)."""
-        em = self.config.em
-        posed = self.template.pose(q, jacobians=False)
-        return e_step(
-            S,
-            posed.points,
-            active,
-            sigma2,
-            em.outlier_weight,
-            mode=em.estep,
-            neighbors=em.neighbors,
-        ).nll
+        return self._e_step(S, self.template.pose(q, jacobians=False), active, sigma2).nll
 
     # ------------------------------------------------------------------ calibration
     def _initial_pose(self, S: np.ndarray) -> np.ndarray:
@@ -1031,7 +1028,6 @@ class CloudRetargeter:
         ns = 1 if common else K
         qp = QPProblem(nv + ns, 0)
         solver = make_solver(self.config.solver, path="solver")
-        vi, qi = self._vi[self._bounded], self._qi[self._bounded]
         active = self._active(T.pose(q, jacobians=False))
         rng = np.random.default_rng(0)
         S_dense = S[np.sort(rng.choice(len(S), size=min(len(S), 1000), replace=False))]
@@ -1076,9 +1072,7 @@ class CloudRetargeter:
                 b[self._vi] -= w * (q[self._qi] - self._calibration_posture)
             H[np.diag_indices(nv + ns)] += em.damping * max(np.trace(H) / (nv + ns), 1e-12) + 1e-12
             qp.H[...], qp.g[...] = H, -b
-            qp.lb[...], qp.ub[...] = -np.inf, np.inf
-            qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
-            qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+            vi = self._joint_step_bounds(qp, q)
             qp.lb[nv:] = lo_s - (s.min() if common else s)
             qp.ub[nv:] = hi_s - (s.max() if common else s)
             sol = solver.solve(qp)

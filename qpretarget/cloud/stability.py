@@ -197,9 +197,7 @@ class StabilityRows:
         if not support.feet:
             self.normals, self.offsets, self.hull = np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2))
             return
-        self.hull = self._hull(q)
-        n, o = polygon_halfplanes(self.hull, 0.0)
-        self.full_normals, self.full_offsets = n, o
+        n, o = self._polygon(q)
         self.centre, self.radius = chebyshev_centre(n, o)
         margin = self._margin = min(self.margin, 0.9 * self.radius)
         if self.region == "polygon":
@@ -216,9 +214,20 @@ class StabilityRows:
                 f"the support polygon has {len(self.normals)} edges, more than {self.n_rows} rows."
             )
 
-    def _hull(self, q: np.ndarray) -> np.ndarray:
+    def _polygon(self, q: np.ndarray, *, kinematics: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Set :attr:`hull` and the unshrunk half-planes at ``q``; return ``(normals, offsets)``.
+
+        ``kinematics=False``: the frames of :attr:`data` are already at ``q``.
+        """
+        self.hull = self._hull(q, kinematics=kinematics)
+        n, o = polygon_halfplanes(self.hull, 0.0)
+        self.full_normals, self.full_offsets = n, o
+        return n, o
+
+    def _hull(self, q: np.ndarray, *, kinematics: bool = True) -> np.ndarray:
         """Convex hull (K, 2) of the supporting soles in the primary sole frame at ``q``."""
-        self._kinematics(q, False)
+        if kinematics:
+            self._kinematics(q, False)
         MF = self.data.oMf[self._sole_ids[self.support.primary]]  # type: ignore[index]
         pts = []
         for f in self.support.feet:
@@ -229,16 +238,14 @@ class StabilityRows:
             pts.append(((world - MF.translation) @ MF.rotation)[:, :2])
         return convex_hull_2d(np.concatenate(pts))
 
-    def _refresh(self, q: np.ndarray) -> None:
+    def _refresh(self, q: np.ndarray, *, kinematics: bool = True) -> None:
         """Rebuild the polygon of a double support at ``q``.
 
         The margin and, for ``inscribed_circle``, the disc stay those of :meth:`set_support`.
         """
         if len(self.support.feet) < 2:
             return
-        self.hull = self._hull(q)
-        n, o = polygon_halfplanes(self.hull, 0.0)
-        self.full_normals, self.full_offsets = n, o
+        n, o = self._polygon(q, kinematics=kinematics)
         if self.region == "polygon" and len(n) <= self.n_rows:
             self.normals, self.offsets = n, o - self._margin
 
@@ -263,12 +270,14 @@ class StabilityRows:
         move with the leg joints, and a region kept from the frame's start let the CoM end up
         to a few mm outside the support polygon of the fitted pose.
         """
-        self._refresh(q)
         self.C[...] = 0.0
         self.u[...] = np.inf
+        if not self.support.feet:
+            return self.C, self.l, self.u
+        cF, JF = self.com_in_sole(q, jacobian=True)  # kinematics and frames at q
+        self._refresh(q, kinematics=False)
         k = len(self.normals)
         if k:
-            cF, JF = self.com_in_sole(q, jacobian=True)
             self.C[:k] = self.normals @ JF[:2]  # type: ignore[index]
             self.u[:k] = self.offsets - self.normals @ cF[:2]
         return self.C, self.l, self.u
