@@ -108,10 +108,13 @@ class CalibrationConfig:
             articulation, e.g. ``left_elbow_joint``); ``null``: every articulation that has
             one further down its chain (not wrists and ankles).
         centre_prior: prior standard deviation of a joint centre's offset [m].
-        centre_iterations: joint EM iterations on pose and centres per frame.
+        centre_iterations: most joint EM iterations on pose and centres per frame (they stop
+            when no joint moves more than ``em.tolerance`` and no centre more than 0.5 mm).
         centre_bound: largest offset of a joint centre [m] (along its limb, or per axis).
-        centre_information: weight of a frame's information on the centres (1: all of it;
-            below 1 discounts the correlated errors of neighbouring points).
+        centre_information: weight of a frame's information on the centres (1: all of it, as
+            if every cloud point were an independent measurement; below 1 discounts the
+            correlated errors of neighbouring points, so that the frames that bend a joint
+            most, which come later, can still move an estimate the first frames made).
         centre_axes: ``limb``: each articulation's centre moves along its limb only (the line
             a straight limb does not show); ``free``: in 3-D.
     """
@@ -129,9 +132,9 @@ class CalibrationConfig:
     joint_centres: bool = True
     centre_joints: list[str] | None = None
     centre_prior: float = 0.1
-    centre_iterations: int = 3
+    centre_iterations: int = 8
     centre_bound: float = 0.15
-    centre_information: float = 1.0
+    centre_information: float = 0.1
     centre_axes: str = "limb"
 
 

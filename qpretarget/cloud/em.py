@@ -106,6 +106,9 @@ CONTACT_LENGTH = 0.1
 CALIBRATION_DENSE_SIGMA = 0.03
 #: Largest initial sigma of the calibration [m] (the start pose is already roughly aligned).
 CALIBRATION_SIGMA0 = 0.05
+#: The joint pose + centre iterations of a frame stop when no centre moves more than this [m]
+#: (and no joint more than ``em.tolerance``).
+CENTRE_TOLERANCE = 5.0e-4
 
 
 # ------------------------------------------------------------------------------ E-step
@@ -842,9 +845,18 @@ class CloudRetargeter:
             return 0.5 * float(d @ Lam @ d)
 
         Hqq = Hqe = Hee = None
+        pairs, ref = None, None
         for _ in range(cal.centre_iterations):
             posed = T.pose(q)
-            est = self._e_step(S, posed, active, sigma2)
+            # Neighbour pairs reused while the template moves little (as in _em_stage).
+            if pairs is not None and ref is not None:
+                moved = float(np.max(np.abs(posed.points[active] - ref)))
+                if moved > em.neighbor_refresh * math.sqrt(sigma2):
+                    pairs = None
+            est = self._e_step(S, posed, active, sigma2, pairs=pairs)
+            if pairs is None:
+                ref = posed.points[active]
+            pairs = est.pairs
             J6 = T.joint_jacobians()
             E = est.Px - est.P1[:, None] * posed.points
             Hqq, bq = T.normal_equations(posed, J6, est.P1, E)
@@ -897,11 +909,17 @@ class CloudRetargeter:
                 break
             applied = self.model_difference(q, q_try)
             move = float(np.max(np.abs(applied[self._vi]), initial=0.0))
+            base = float(np.max(np.abs(applied[: self.robot.root_nv]), initial=0.0))
+            shift = float(np.max(np.abs(e_try - e), initial=0.0))
             q, e = q_try, e_try
             sigma2 = max(est.sigma2_update(posed_try), em.sigma2_min)
             log.append(
                 IterationLog("centres", est.nll, est.nll + prior0, alpha, halvings, sigma2, move)
             )
+            # Converged: the paper's joint criterion (V.C) and the centres moving less than
+            # CENTRE_TOLERANCE.
+            if max(move, base) < em.tolerance and shift < CENTRE_TOLERANCE:
+                break
         if Hqq is not None:
             # This frame's information on the centres, the pose marginalized (at the last
             # linearization; the temporal term counts as the pose's prior).

@@ -28,9 +28,8 @@ CONFIG = Path(__file__).resolve().parents[2] / "configs" / "cloud_g1.yaml"
 CLIP = "cmu_14_37_drink_soda.bvh"
 STEP, FRAMES = 12, 12
 #: The issue's acceptance: angle between the robot's and the human's upper arm and forearm
-#: [deg]. Not met (measured 15.5 deg): the test asserts MEASURED_BOUND_DEG instead.
+#: [deg], on every frame.
 ACCEPTANCE_DEG = 15.0
-MEASURED_BOUND_DEG = 17.5
 
 
 @pytest.fixture(scope="module")
@@ -107,27 +106,59 @@ def direction_errors(g1, human_run) -> np.ndarray:
 
 
 def test_wrist_and_elbow_directions_follow_the_human(g1, human_run):
-    """The issue asks for 15 deg; this fit does not reach it (see docs/point_clouds.md).
+    """The issue's acceptance: upper arms and forearms within 15 deg of the human's, every frame.
 
-    Measured on this sequence: worst 15.5 deg (drinking arm's upper arm while the cup is up),
-    10.3 / 5.6 / 6.7 deg for the other three segments; 27 deg without the joint-centre
-    estimate, 32 deg with the human poser's former clavicle drift. The bound asserted is the
-    measured level with 2 deg for round-off across BLAS builds, so that a regression fails here;
-    ACCEPTANCE_DEG, the issue's bound, is reported by the assertion message.
+    Measured on this sequence: worst 12.5 deg (drinking arm's upper arm while the cup is up),
+    8.7 / 4.8 / 6.5 deg for the other three segments. The margin (2.5 deg) covers round-off
+    across BLAS builds; the failures this guards against are above it: 15.3-15.5 deg with a
+    frame's full information on the joint centres (``calibration.centre_information: 1``, the
+    first frames lock the elbow's estimate in), 27 deg without the joint-centre estimate,
+    32 deg with the human poser's former clavicle drift.
     """
     err = direction_errors(g1, human_run)
-    assert err.max() <= MEASURED_BOUND_DEG, (
-        f"worst {err.max():.1f} deg (issue: {ACCEPTANCE_DEG} deg), per segment "
+    assert err.max() <= ACCEPTANCE_DEG, (
+        f"worst {err.max():.1f} deg at frame {int(err.max(axis=1).argmax())}, per segment "
         f"{np.round(err.max(axis=0), 1)}"
     )
+
+
+def test_learned_joint_centres_move_towards_the_humans(human_run):
+    """The shoulder and elbow centres learned along the run sit nearer the human model's.
+
+    Truth: the human model's shoulder and elbow at the calibration frame, against the fitted
+    template's joint there without its learned offset (an offset moves a centre by itself at
+    that configuration, :meth:`Template.set_scales`). Measured: 1.3 / 3.4 / 0.6 / 1.8 cm left
+    (left shoulder, left elbow, right shoulder, right elbow) of 5.6 / 7.3 / 5.1 / 6.9 cm
+    between G1's centres and the human's (ratios 0.23 / 0.47 / 0.12 / 0.26). Asserted: every
+    one at least 30 % nearer, half the distance on average.
+    """
+    syn, poser, fitter, _, results = human_run
+    T = fitter.template
+    joints = fitter.config.calibration.centre_joints
+    data = T.model.createData()
+    pin.forwardKinematics(T.model, data, results[0].q_fit)
+    human = poser.model_keypoints(syn.q[0])
+    learned = T.centres()
+    ratios = {}
+    for a, group in enumerate(T.articulations):
+        names = [T.model.names[int(j)] for j in group]
+        if not any(n in joints for n in names):
+            continue
+        j = int(max(group))
+        side, part = T.model.names[j].split("_")[:2]  # e.g. left, shoulder
+        truth = human[f"{side}_{part}"] - (data.oMi[j].translation - learned[a])
+        ratios[T.model.names[j]] = np.linalg.norm(learned[a] - truth) / np.linalg.norm(truth)
+    assert len(ratios) == 4, ratios
+    assert max(ratios.values()) <= 0.7, ratios
+    assert np.mean(list(ratios.values())) <= 0.5, ratios
 
 
 def test_feet_flat_and_pointing_like_the_human(g1, human_run):
     """The command's feet: flat on the floor, heading where the person's feet point.
 
-    Measured (CMU 14_37): tilt of the second sole at most 3.2 deg (the primary one is flat by
+    Measured (CMU 14_37): tilt of the second sole at most 3.3 deg (the primary one is flat by
     construction), heading within 12 deg of the human model's feet (which turn by a few deg
-    while moving from the calibration posture into the clip), slip of the second sole 12 mm.
+    while moving from the calibration posture into the clip), slip of the second sole 13 mm.
     The bounds (5 deg, 20 deg, 25 mm) leave room for round-off across BLAS builds and catch the
     failures they guard against: without the contact term the second sole tilted by up to
     11 deg and slid by 65 mm, without the calibration posture term the legs twisted by 60 deg
