@@ -643,6 +643,40 @@ class CloudRetargeter:
             **extra,
         )
 
+    def _kept_pairs(
+        self,
+        pairs: np.ndarray | None,
+        ref: np.ndarray | None,
+        posed: PosedTemplate,
+        active: np.ndarray,
+        sigma2: float,
+    ) -> np.ndarray | None:
+        """The E-step's neighbour pairs to reuse, or None to search again.
+
+        None once a template point has moved more than ``em.neighbor_refresh`` sigma from
+        ``ref``, where the pairs were searched.
+        """
+        if pairs is None or ref is None:
+            return None
+        moved = float(np.max(np.abs(posed.points[active] - ref)))
+        return None if moved > self.config.em.neighbor_refresh * math.sqrt(sigma2) else pairs
+
+    def _damping(self, H: np.ndarray) -> float:
+        """Levenberg damping of the pose block: ``em.damping`` times its mean diagonal."""
+        nv = self.robot.nv
+        return self.config.em.damping * max(float(np.trace(H[:nv, :nv])) / nv, 1e-12)
+
+    def _set_rows(self, qp: QPProblem, q: np.ndarray, with_rows: bool) -> None:
+        """The support-polygon rows on the QP's pose variables (none: free rows)."""
+        if not self._n_rows:
+            return
+        qp.C[...] = 0.0
+        if with_rows and self.rows.support.feet:
+            C, lo, up = self.rows.rows(q)
+            qp.C[:, : self.robot.nv], qp.l[...], qp.u[...] = C, lo, up
+        else:
+            qp.l[...], qp.u[...] = -np.inf, np.inf
+
     def _solve_step(
         self,
         H: np.ndarray,
@@ -652,25 +686,14 @@ class CloudRetargeter:
         sigma2: float,
         with_rows: bool,
     ) -> np.ndarray | None:
-        em = self.config.em
         qp = self._qp
         nv = self.robot.nv
         qp.H[...] = H
         qp.g[...] = -b
         self._add_priors(qp.H, qp.g, q, q_prev, sigma2)
-        damp = em.damping * max(float(np.trace(H)) / nv, 1e-12)
-        qp.H[np.diag_indices(nv)] += damp
+        qp.H[np.diag_indices(nv)] += self._damping(H)
         vi = self._joint_step_bounds(qp, q)
-        if self._n_rows:
-            if with_rows and self.rows.support.feet:
-                C, lo, up = self.rows.rows(q)
-                qp.C[...] = C
-                qp.l[...] = lo
-                qp.u[...] = up
-            else:
-                qp.C[...] = 0.0
-                qp.l[...] = -np.inf
-                qp.u[...] = np.inf
+        self._set_rows(qp, q, with_rows)
         sol = self._solver.solve(qp)
         if sol.x is None or not np.all(np.isfinite(sol.x)):
             return None
@@ -727,10 +750,7 @@ class CloudRetargeter:
         eta = 1.0
         for _ in range(iterations):
             posed = T.pose(q)
-            if pairs is not None and ref is not None:
-                moved = float(np.max(np.abs(posed.points[active] - ref)))
-                if moved > em.neighbor_refresh * math.sqrt(sigma2):
-                    pairs = None
+            pairs = self._kept_pairs(pairs, ref, posed, active, sigma2)
             est = self._e_step(
                 S,
                 posed,
@@ -848,11 +868,7 @@ class CloudRetargeter:
         pairs, ref = None, None
         for _ in range(cal.centre_iterations):
             posed = T.pose(q)
-            # Neighbour pairs reused while the template moves little (as in _em_stage).
-            if pairs is not None and ref is not None:
-                moved = float(np.max(np.abs(posed.points[active] - ref)))
-                if moved > em.neighbor_refresh * math.sqrt(sigma2):
-                    pairs = None
+            pairs = self._kept_pairs(pairs, ref, posed, active, sigma2)
             est = self._e_step(S, posed, active, sigma2, pairs=pairs)
             if pairs is None:
                 ref = posed.points[active]
@@ -869,17 +885,11 @@ class CloudRetargeter:
             qp.g[:nv] = -bq
             qp.g[nv:] = -be + sigma2 * (Lam @ (e - e_hat))
             self._add_priors(qp.H, qp.g, q, q_prev, sigma2)
-            qp.H[np.diag_indices(nv)] += em.damping * max(float(np.trace(Hqq)) / nv, 1e-12)
+            qp.H[np.diag_indices(nv)] += self._damping(Hqq)
             self._joint_step_bounds(qp, q)
             qp.lb[nv:] = np.minimum(-bound - e, 0.0)
             qp.ub[nv:] = np.maximum(bound - e, 0.0)
-            if self._n_rows:
-                qp.C[...] = 0.0
-                if use_rows and self.rows.support.feet:
-                    C, lo, up = self.rows.rows(q)
-                    qp.C[:, :nv], qp.l[...], qp.u[...] = C, lo, up
-                else:
-                    qp.l[...], qp.u[...] = -np.inf, np.inf
+            self._set_rows(qp, q, use_rows)
             sol = self._solver_centres.solve(qp)
             prior0 = self._prior(q, q_prev) + prior_e(e)
             obj0 = est.q_value(posed, sigma2) + prior0
@@ -926,7 +936,7 @@ class CloudRetargeter:
             A = Hqq.copy()
             if q_prev is not None and em.temporal_weight > 0:
                 A[self._vi, self._vi] += 2.0 * sigma2 * em.temporal_weight
-            A[np.diag_indices(nv)] += em.damping * max(float(np.trace(Hqq)) / nv, 1e-12) + 1e-12
+            A[np.diag_indices(nv)] += self._damping(Hqq) + 1e-12
             info = (Hee - Hqe.T @ np.linalg.solve(A, Hqe)) / sigma2
             info = 0.5 * (info + info.T)
             self._centre_info = Lam + cal.centre_information * info

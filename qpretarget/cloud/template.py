@@ -425,7 +425,7 @@ class Template:
             if not self._frame_at_joint[f]:
                 t = t - ej_loc[self._frame_joint[f]]
             self.model.frames[f].placement.translation = t
-        self.data = self.model.createData()
+        # self.data stays: placements are read by every kinematics pass, the structure is fixed.
         self.local = self.points0 * s[self.point_segment][:, None] - ej_loc[self.joint]
         self._setup_blend()
 
@@ -730,16 +730,14 @@ class Template:
         """
         R, R0, par = posed.R, self._R0, self._parents
         art = self._articulation_of_joint
-        out = np.zeros((len(self.used_joints), 3, 3 * self.n_centres))
-        for g, j in enumerate(self.used_joints):
-            i = int(j)
-            while i > 0:
-                a = art[i]
-                if a >= 0:
-                    p = par[i]
-                    out[g, :, 3 * a : 3 * a + 3] += R[p] @ R0[p].T - R[i] @ R0[i].T
-                i = int(par[i])
-        return out
+        moving = np.flatnonzero(art >= 0)  # joints of an articulation
+        p = par[moving]
+        G = R[p] @ np.swapaxes(R0[p], 1, 2) - R[moving] @ np.swapaxes(R0[moving], 1, 2)
+        # Sum over each point joint's ancestors i, into the block of art[i].
+        W = self._ancestors[np.ix_(self.used_joints, moving)]  # (J, I)
+        onehot = np.eye(self.n_centres)[art[moving]]  # (I, A)
+        out = np.einsum("ji,ia,ibc->jbac", W, onehot, G)
+        return out.reshape(len(self.used_joints), 3, 3 * self.n_centres)
 
     def centre_normal_equations(
         self, posed: PosedTemplate, J6: np.ndarray, P1: np.ndarray, E: np.ndarray
