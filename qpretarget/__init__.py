@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """qpretarget: online human-to-humanoid motion retargeting as a QP whole-body controller."""
 
-from .controller import Controller, StepResult
+from .control.controller import Controller, StepResult
 from .errors import ConfigError, QPRetargetError, SolverError, TargetError, UnknownFrameError
 from .robot import RobotModel, load_robot
 from .robots import ROBOTS

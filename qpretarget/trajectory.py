@@ -169,6 +169,6 @@ class RobotTrajectory:
 
     def make_controller(self):  # noqa: ANN201
         """Rebuild the controller that produced this run from its stored YAML."""
-        from .controller import Controller
+        from .control.controller import Controller
 
         return Controller(load_yaml(self.config_yaml))

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from qpretarget import Controller
-from qpretarget.solver_comparison import scripted_targets
+from qpretarget.analysis.solver_comparison import scripted_targets
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -13,7 +13,7 @@ import argparse
 import json
 from pathlib import Path
 
-from qpretarget.benchmark import bench_config, format_stages, format_table, machine_info
+from qpretarget.analysis.benchmark import bench_config, format_stages, format_table, machine_info
 
 REPO = Path(__file__).resolve().parents[1]
 

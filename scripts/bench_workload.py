@@ -31,10 +31,10 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
-from qpretarget.benchmark import machine_info
-from qpretarget.collision import CollisionModel
+from qpretarget.analysis.benchmark import machine_info
+from qpretarget.collision.geometry import CollisionModel
 from qpretarget.constraints import CONSTRAINTS
-from qpretarget.controller import Controller
+from qpretarget.control.controller import Controller
 from qpretarget.robot import RobotState
 
 REPO = Path(__file__).resolve().parents[1]

@@ -17,13 +17,14 @@ exercise, reaching) with three task sets and reports:
 
 Here: the G1 configs ``configs/crac_ts{1,2,3}_<level>_crac.yaml`` (hierarchy, feet first; CRAC
 weighting W = W_K + W_D; paper gains), plus a ``self_collision`` constraint on the 16 upper-body
-pairs of :data:`qpretarget.metrics.DEFAULT_PAIRS` (CRAC: N_c = 16). "Before filtering" is the same
-config with ``joint_limits`` and ``self_collision`` removed and ``W = I`` (no kinematic weighting).
+pairs of :data:`~qpretarget.analysis.metrics.DEFAULT_PAIRS` (CRAC: N_c = 16). "Before
+filtering" is the same config with ``joint_limits`` and ``self_collision`` removed and
+``W = I`` (no kinematic weighting).
 Clips (../shared/data/mocap): reaching = ``cmu_14_07_reach_up_tiptoe``, boxing =
 ``cmu_17_10_boxing``, exercise = ``cmu_14_14_exercise_squats_twists``, chicken =
 ``cmu_29_22_chicken_flapping`` (the chicken dance itself is not available).
 
-Every number is measured by :mod:`qpretarget.metrics` on the saved runs. The script writes
+Every number is measured by :mod:`qpretarget.analysis.metrics` on the saved runs. The script writes
 ``results.json``, the figures, and ``docs/results.md`` (``--write-docs``)::
 
     python scripts/crac_experiments.py --write-docs            # full clips (up to --seconds 10)
@@ -70,7 +71,7 @@ def load_config(ts: int, level: str) -> dict[str, Any]:
 
 def with_self_collision(cfg: dict[str, Any]) -> dict[str, Any]:
     """``cfg`` with a ``self_collision`` constraint on the 16 default pairs (if it has none)."""
-    from qpretarget.metrics import DEFAULT_PAIRS
+    from qpretarget.analysis.metrics import DEFAULT_PAIRS
 
     out = copy.deepcopy(cfg)
     cons = out.setdefault("constraints", [])
@@ -126,10 +127,10 @@ def retarget_spec(cfg: dict[str, Any]) -> dict[str, Any]:
 # ---------------------------------------------------------------------------------- runs
 def run(cfg: dict[str, Any], clip: str, seconds: float | None, out: Path, tag: str) -> Any:
     """Retarget ``clip`` with ``cfg``, save the run, return its metric series and summary."""
-    from qpretarget.controller import Controller
-    from qpretarget.metrics import compute_series, summarize
+    from qpretarget.analysis.metrics import compute_series, summarize
+    from qpretarget.control.controller import Controller
     from qpretarget.motion import load_motion
-    from qpretarget.retarget import Retargeter
+    from qpretarget.retarget.retargeter import Retargeter
 
     human = load_motion(MOCAP / clip)
     ctrl = Controller(cfg, base_dir=REPO / "configs")
@@ -138,7 +139,7 @@ def run(cfg: dict[str, Any], clip: str, seconds: float | None, out: Path, tag: s
     wall = time.perf_counter() - t0
     traj.save(out / "runs" / f"{tag}.npz")
     # Measure every run on the same pairs (the 16 defaults), whatever its own constraints.
-    from qpretarget.metrics import DEFAULT_PAIRS
+    from qpretarget.analysis.metrics import DEFAULT_PAIRS
 
     series = compute_series(traj, controller=ctrl, pairs=DEFAULT_PAIRS["g1"], safety_distance=D_S)
     summary = summarize(series, per_frame=False)
@@ -293,7 +294,7 @@ def kinematic_row(before: dict[str, Any], after: dict[str, Any]) -> dict[str, An
 
 
 def experiments(args: argparse.Namespace) -> dict[str, Any]:
-    from qpretarget.plots import plot_joint_angles, plot_pair_distances, plot_violations
+    from qpretarget.analysis.plots import plot_joint_angles, plot_pair_distances, plot_violations
 
     out: Path = args.out
     figs: Path = args.figures or out / "figures"
@@ -306,7 +307,7 @@ def experiments(args: argparse.Namespace) -> dict[str, Any]:
         "seconds": seconds,
         "clips": clips,
         "clip_files": {c: CLIPS[c] for c in clips},
-        "pairs": "qpretarget.metrics.DEFAULT_PAIRS['g1'] (16)",
+        "pairs": "qpretarget.analysis.metrics.DEFAULT_PAIRS['g1'] (16)",
         "d_s_m": D_S,
         "d_i_m": D_I,
         "kinematic": {},

@@ -30,7 +30,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from qpretarget import Controller  # noqa: E402
 from qpretarget.motion import load_motion  # noqa: E402
-from qpretarget.shape_retarget import (  # noqa: E402
+from qpretarget.retarget.shape import (  # noqa: E402
     arm_chain,
     retarget_motion,
     retarget_pose,

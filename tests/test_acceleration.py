@@ -12,9 +12,9 @@ import pytest
 import yaml
 from scipy.linalg import expm
 
-from qpretarget.acceleration import PAPER_DAMPING, AccelerationLevel
 from qpretarget.constraints import CONSTRAINTS
-from qpretarget.controller import Controller
+from qpretarget.control.acceleration import PAPER_DAMPING, AccelerationLevel
+from qpretarget.control.controller import Controller
 from qpretarget.errors import ConfigError
 from qpretarget.robot import RobotState
 

@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 import yaml
 
-from qpretarget.collision import (
+from qpretarget.collision.geometry import (
     CollisionModel,
     fit_capsule,
     link_shapes,

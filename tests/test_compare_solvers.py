@@ -9,9 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qpretarget.cli import main
-from qpretarget.controller import Controller
-from qpretarget.solver_comparison import (
+from qpretarget.analysis.solver_comparison import (
     ComparisonError,
     available_solver_names,
     load_targets,
@@ -19,6 +17,8 @@ from qpretarget.solver_comparison import (
     scripted_targets,
     targets_from_run,
 )
+from qpretarget.cli import main
+from qpretarget.control.controller import Controller
 from qpretarget.solvers import installed_qpsolvers
 from qpretarget.trajectory import RobotTrajectory
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import yaml
 
-from qpretarget.builtin_motion import builtin_motion, human_model, scripted_joints
 from qpretarget.cli import main
+from qpretarget.motion.builtin import builtin_motion, human_model, scripted_joints
 from qpretarget.motion.phases import detect_support_phases
-from qpretarget.retarget import whole_body_config
+from qpretarget.retarget.retargeter import whole_body_config
 from qpretarget.trajectory import RobotTrajectory
 
 REPO = Path(__file__).resolve().parents[1]

@@ -10,10 +10,10 @@ import pytest
 import yaml
 from PIL import Image
 
+from qpretarget.analysis.plots import FIGSIZE, figure_pixels
+from qpretarget.analysis.solver_comparison import record_run, scripted_targets
 from qpretarget.cli import main
-from qpretarget.controller import Controller
-from qpretarget.plots import FIGSIZE, figure_pixels
-from qpretarget.solver_comparison import record_run, scripted_targets
+from qpretarget.control.controller import Controller
 
 
 @pytest.fixture(scope="module")

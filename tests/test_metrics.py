@@ -11,8 +11,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from qpretarget.controller import Controller
-from qpretarget.metrics import (
+from qpretarget.analysis.metrics import (
     GeometryPairDistances,
     MetricsError,
     average_absolute_power,
@@ -28,7 +27,8 @@ from qpretarget.metrics import (
     solve_time_stats,
     summarize,
 )
-from qpretarget.solver_comparison import record_run, scripted_targets
+from qpretarget.analysis.solver_comparison import record_run, scripted_targets
+from qpretarget.control.controller import Controller
 from qpretarget.trajectory import RobotTrajectory, TrajectoryFormatError
 
 DT = 0.01

@@ -13,17 +13,17 @@ import pytest
 import yaml
 
 from qpretarget.commands.demo import demo_controller
-from qpretarget.controller import Controller
+from qpretarget.control.controller import Controller
 from qpretarget.errors import ConfigError
 from qpretarget.motion import HumanMotion, load_motion
 from qpretarget.motion.calibration import rotation_z
-from qpretarget.retarget import (
+from qpretarget.retarget.retargeter import (
     Retargeter,
     RetargetError,
     RetargetSpec,
-    summarize_run,
     whole_body_config,
 )
+from qpretarget.retarget.summary import summarize_run
 from qpretarget.trajectory import RobotTrajectory
 
 REPO = Path(__file__).resolve().parents[1]

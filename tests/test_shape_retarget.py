@@ -18,14 +18,14 @@ from scipy.optimize import minimize
 from qpretarget import Controller
 from qpretarget.errors import ConfigError, TargetError
 from qpretarget.motion import HumanMotion, load_motion
-from qpretarget.robot import RobotState
-from qpretarget.shape_retarget import (
+from qpretarget.retarget.shape import (
     arm_chain,
     retarget_motion,
     retarget_pose,
     robot_chain,
     shape_task,
 )
+from qpretarget.robot import RobotState
 
 REACH = "cmu_14_07_reach_up_tiptoe.bvh"
 TEAPOT = "cmu_29_03_teapot_arm_gestures.bvh"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from qpretarget import load_robot
-from qpretarget.timing import (
+from qpretarget.retarget.timing import (
     TimingError,
     blend_factors,
     expand_time,

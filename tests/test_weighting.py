@@ -15,7 +15,7 @@ import yaml
 from qpretarget import Controller, load_robot
 from qpretarget.errors import ConfigError
 from qpretarget.robot import RobotState
-from qpretarget.weighting import REGULARIZATIONS
+from qpretarget.weighting.base import REGULARIZATIONS
 
 JOINT = "left_elbow_joint"
 

@@ -348,7 +348,7 @@ class HumanPoser:
     def __init__(
         self, *, ticks_per_frame: int = 8, first_frame_ticks: int = 80, held_weight: float = 0.1
     ) -> None:
-        from ..controller import Controller
+        from ..control.controller import Controller
         from ..motion import load_keypoint_map
 
         self.kmap = load_keypoint_map("human_description")

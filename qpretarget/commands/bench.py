@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark and print the tables."""
-    from ..benchmark import bench_config, format_stages, format_table, machine_info
+    from ..analysis.benchmark import bench_config, format_stages, format_table, machine_info
 
     if args.ticks < 1 or args.passes < 1 or args.warmup < 0:
         raise SystemExit("qpretarget bench: --ticks and --passes must be >= 1, --warmup >= 0")

@@ -49,7 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the comparison, print the table, save it with ``-o``."""
-    from ..solver_comparison import compare_solvers
+    from ..analysis.solver_comparison import compare_solvers
 
     solvers = [s.strip() for s in args.solvers.split(",") if s.strip()] if args.solvers else None
     result = compare_solvers(

@@ -2,9 +2,9 @@
 """``qpretarget demo``: retarget the built-in human motion to a bundled robot, nothing to download.
 
 The motion is example-robot-data's ``human_description`` model driven by a scripted wave, a reach
-across the body, a squat and a step to the side (:mod:`qpretarget.builtin_motion`). The controller
+across the body, a squat and a step to the side (:mod:`qpretarget.motion.builtin`). The controller
 is the repository's ``configs/<robot>_whole_body.yaml`` when it exists, otherwise the one
-:func:`qpretarget.retarget.whole_body_config` builds from the robot's registry entry.
+:func:`qpretarget.retarget.retargeter.whole_body_config` builds from the robot's registry entry.
 """
 
 from __future__ import annotations
@@ -56,8 +56,8 @@ def demo_controller(robot: str, config: str | None = None):  # noqa: ANN201
     Returns:
         ``(controller, source)`` with ``source`` saying which config was used.
     """
-    from ..controller import Controller
-    from ..retarget import whole_body_config
+    from ..control.controller import Controller
+    from ..retarget.retargeter import whole_body_config
     from ..yamlio import load_yaml
 
     if config is not None:
@@ -74,9 +74,10 @@ def demo_controller(robot: str, config: str | None = None):  # noqa: ANN201
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo and print its summary."""
-    from ..builtin_motion import DURATION, builtin_motion
     from ..errors import ConfigError
-    from ..retarget import Retargeter, format_summary, summarize_run
+    from ..motion.builtin import DURATION, builtin_motion
+    from ..retarget.retargeter import Retargeter
+    from ..retarget.summary import format_summary, summarize_run
 
     seconds = DURATION if args.seconds is None else args.seconds
     if not 0.2 <= seconds:

@@ -52,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _pairs(values: list[str] | None) -> list[tuple[str, str]] | None:
-    from ..metrics import MetricsError
+    from ..analysis.metrics import MetricsError
 
     if not values:
         return None
@@ -69,7 +69,7 @@ def _pairs(values: list[str] | None) -> list[tuple[str, str]] | None:
 
 def run(args: argparse.Namespace) -> int:
     """Compute the metrics, write metrics.json and the figures, print a summary."""
-    from ..metrics import compute_series, dumps, summarize
+    from ..analysis.metrics import compute_series, dumps, summarize
     from ..trajectory import RobotTrajectory
 
     out = Path(args.output)
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     (out / "metrics.json").write_text(dumps(metrics), encoding="utf-8")
     written = [out / "metrics.json"]
     if not args.no_figures:
-        from ..plots import write_figures
+        from ..analysis.plots import write_figures
 
         written += list(write_figures(series, out, before=before, joints=args.joints).values())
     _print_summary(metrics)

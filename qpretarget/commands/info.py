@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         robot = load_robot(args.target)
         print("\n".join(describe_robot(robot, frames=args.frames, limits=args.limits)))
         return 0
-    from ..controller import Controller
+    from ..control.controller import Controller
     from ..errors import ConfigError
 
     path = Path(args.target)

@@ -73,9 +73,10 @@ def _load(args: argparse.Namespace):  # noqa: ANN202
 
 def run(args: argparse.Namespace) -> int:
     """Retarget, save, print the summary; return the exit code."""
-    from ..controller import Controller
+    from ..control.controller import Controller
     from ..errors import ConfigError
-    from ..retarget import Retargeter, format_summary, summarize_run
+    from ..retarget.retargeter import Retargeter
+    from ..retarget.summary import format_summary, summarize_run
 
     if args.rate is not None and not args.rate > 1:
         raise ConfigError(f"--rate must be above 1 Hz, got {args.rate}.")

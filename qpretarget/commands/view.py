@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def build_viewer(path: Path, *, host: str, port: int, strict_port: bool = False):  # noqa: ANN201
     """Build the viewer for a run or a config (used by the command and by tests)."""
-    from ..controller import Controller
+    from ..control.controller import Controller
     from ..errors import ConfigError
     from ..trajectory import RobotTrajectory
     from ..viz.viewer import Viewer
@@ -47,7 +47,7 @@ def build_viewer(path: Path, *, host: str, port: int, strict_port: bool = False)
         viewer = Viewer(ctrl.robot, host=host, port=port, search_port=not strict_port)
         series = None
         try:
-            from ..metrics import compute_series
+            from ..analysis.metrics import compute_series
 
             s = compute_series(traj)
             series = {"com_margin": s.com_margin}

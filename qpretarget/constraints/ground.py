@@ -26,7 +26,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..collision import CollisionModel, LinkShape, link_shapes, obstacle_shape
+from ..collision.geometry import CollisionModel, LinkShape, link_shapes, obstacle_shape
 from ..errors import ConfigError
 from ..robot import RobotModel, RobotState
 from .base import CONSTRAINTS

@@ -21,7 +21,7 @@ pushed apart, at most at ``recovery_speed``.
 The block has one row per pair (or ``max_rows`` rows given to the closest pairs); rows of pairs
 beyond :math:`d_i` are zero with infinite bounds, so the QP keeps its shape and the solver stays
 warm. The importance is 70: when hard constraints conflict, collisions give before contacts and
-joint limits (see :mod:`qpretarget.relaxation`).
+joint limits (see :mod:`qpretarget.control.relaxation`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from ..collision import GEOMETRIES, CollisionModel, LinkShape, adjacent_links, link_shapes
+from ..collision.geometry import GEOMETRIES, CollisionModel, LinkShape, adjacent_links, link_shapes
 from ..errors import ConfigError, UnknownNameError
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
@@ -363,7 +363,7 @@ class DistanceDamper(Constraint):
 
     @property
     def safety_distance(self) -> float:
-        """Safety distance :math:`d_s` [m] (used by :mod:`qpretarget.metrics`)."""
+        """Safety distance :math:`d_s` [m] (used by :mod:`qpretarget.analysis.metrics`)."""
         return self.d_s
 
 

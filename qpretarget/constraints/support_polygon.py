@@ -18,7 +18,7 @@ tick of its distance to a line ``recovery_depth`` inside the edge (so that it re
 number of ticks, about :math:`\ln(\delta / (d + \delta)) / \ln(1 - \gamma)` from a distance
 :math:`d` outside), so the constraint recovers instead of being infeasible forever (when the
 demand is more than the other constraints allow this tick, the relaxation of
-``qpretarget.relaxation`` lets this constraint give first and reports it). :math:`\gamma = 1` is
+``control.relaxation`` lets this constraint give first and reports it). :math:`\gamma = 1` is
 DESIGN.md's plain linearization.
 
 The hull is recomputed only when the contacts change (``on_contacts_changed``, reset), never per

@@ -37,7 +37,7 @@ hand over :math:`v^* = \dot p_r + K e` for the tick only, so the blend is applie
 itself: the error feedback is scaled by :math:`(1 - b)` as the pair closes in, which is the role of
 the decreasing :math:`K'`.
 
-Geometry is the shared :class:`qpretarget.collision.CollisionModel`, the one the QP's
+Geometry is the shared :class:`qpretarget.collision.geometry.CollisionModel`, the one the QP's
 ``self_collision`` rows use (one convex hull or capsule per link, docs/collisions.md): its
 witness points :math:`p_a, p_b` and unit normal :math:`n` (from :math:`a` to :math:`b`, signed:
 also valid in penetration), with the temporal-coherence broad phase, so only pairs that can be
@@ -57,7 +57,7 @@ YAML::
       critical_distance: 0.05     # d_c [m]
       blend_alpha: 15.0           # alpha of eq. 23 (paper figure: 15)
       blend_delta: 1.0            # delta of eq. 23 (0.5 or 1.0 in the paper)
-      geometry: convex_hull       # or capsule (qpretarget.collision)
+      geometry: convex_hull       # or capsule (qpretarget.collision.geometry)
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from ..collision import CollisionModel, link_shapes
+from ..collision.geometry import CollisionModel, link_shapes
 from ..constraints.self_collision import resolve_link
 from ..errors import ConfigError
 from ..robot import LWA, RobotModel, RobotState
@@ -112,7 +112,7 @@ class Redirection(Strategy):
         clamping: Poubel's clamping loop for the box bounds on the last step.
         ignore_rows: run even if the config has constraint rows (they are ignored).
         activation: pairs with :math:`b(d)` below this are not redirected (nor computed).
-        geometry: ``convex_hull`` or ``capsule`` link shapes (:mod:`qpretarget.collision`).
+        geometry: ``convex_hull`` or ``capsule`` link shapes (:mod:`qpretarget.collision.geometry`).
     """
 
     def __init__(

@@ -7,9 +7,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from qpretarget.collision import CollisionModel, obstacle_shape
+from qpretarget.collision.geometry import CollisionModel, obstacle_shape
 from qpretarget.constraints.ground import Ground
-from qpretarget.controller import Controller
+from qpretarget.control.controller import Controller
 from qpretarget.errors import ConfigError
 from qpretarget.robot import RobotModel, RobotState
 

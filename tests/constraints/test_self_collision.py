@@ -7,9 +7,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from qpretarget.collision import CollisionModel
+from qpretarget.collision.geometry import CollisionModel
 from qpretarget.constraints.self_collision import SelfCollision
-from qpretarget.controller import Controller
+from qpretarget.control.controller import Controller
 from qpretarget.errors import ConfigError, UnknownNameError
 from qpretarget.robot import RobotModel, RobotState
 

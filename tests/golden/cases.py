@@ -42,7 +42,7 @@ def _controller(path: Path):  # noqa: ANN202
 
 def _clip_run(config: str, clip: str, start: float, end: float) -> np.ndarray:
     from qpretarget.motion import load_motion
-    from qpretarget.retarget import Retargeter
+    from qpretarget.retarget.retargeter import Retargeter
 
     ctrl = _controller(REPO / "configs" / config)
     motion = load_motion(MOCAP / clip).slice(start, end)
@@ -53,7 +53,7 @@ def _clip_run(config: str, clip: str, start: float, end: float) -> np.ndarray:
 def _demo_walk() -> np.ndarray:
     from qpretarget import Controller
     from qpretarget.motion import load_motion
-    from qpretarget.retarget import Retargeter, whole_body_config
+    from qpretarget.retarget.retargeter import Retargeter, whole_body_config
     from qpretarget.yamlio import load_yaml
 
     path = REPO / "configs" / "g1_whole_body.yaml"
@@ -86,7 +86,7 @@ def _workload_b(n_ticks: int = 200) -> np.ndarray:
 
 
 def _scripted(config: str, seconds: float = 2.0) -> np.ndarray:
-    from qpretarget.solver_comparison import scripted_targets
+    from qpretarget.analysis.solver_comparison import scripted_targets
 
     ctrl = _controller(REPO / "configs" / config)
     out = []

@@ -19,7 +19,7 @@ from qpretarget.motion.calibration import (
     triad,
 )
 from qpretarget.motion.scaling import Scaler, limit_leg_extension
-from qpretarget.retarget import default_robot_keypoints
+from qpretarget.retarget.retargeter import default_robot_keypoints
 from qpretarget.robot import load_robot
 
 # Scaled lengths and directions are computed with a handful of floating-point operations from

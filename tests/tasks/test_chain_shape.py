@@ -10,7 +10,7 @@ import yaml
 
 from qpretarget import Controller
 from qpretarget.errors import ConfigError, TargetError
-from qpretarget.shape_retarget import retarget_pose, robot_chain
+from qpretarget.retarget.shape import retarget_pose, robot_chain
 from qpretarget.tasks.chain_shape import (
     ChainShapeTask,
     normalized_pose,

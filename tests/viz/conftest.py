@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from qpretarget.controller import Controller
-from qpretarget.solver_comparison import record_run, scripted_targets
+from qpretarget.analysis.solver_comparison import record_run, scripted_targets
+from qpretarget.control.controller import Controller
 
 
 @pytest.fixture(scope="package")

@@ -12,8 +12,8 @@ import socket
 import numpy as np
 import pytest
 
-from qpretarget.controller import Controller
-from qpretarget.solver_comparison import scripted_targets
+from qpretarget.analysis.solver_comparison import scripted_targets
+from qpretarget.control.controller import Controller
 from qpretarget.viz.screenshot import screenshot
 from qpretarget.viz.viewer import ViewerError, choose_port
 
@@ -129,7 +129,7 @@ def test_live_viewer_from_a_plain_script(configs_dir, tmp_path) -> None:
     script = tmp_path / "loop.py"
     script.write_text(
         "from qpretarget import Controller\n"
-        "from qpretarget.solver_comparison import scripted_targets\n"
+        "from qpretarget.analysis.solver_comparison import scripted_targets\n"
         "from qpretarget.viz.viewer import LiveViewer\n"
         f"ctrl = Controller.from_yaml({str(configs_dir / 'g1_augmentation.yaml')!r})\n"
         "live = LiveViewer(ctrl, port=0)\n"

@@ -28,11 +28,11 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from .motion.calibration import KEYPOINT_TREE
-from .motion.human_motion import HumanMotion
-from .motion.keypoints import load_keypoint_map
-from .motion.phases import min_jerk
-from .robot import resolve_robot_path
+from ..robot import resolve_robot_path
+from .calibration import KEYPOINT_TREE
+from .human_motion import HumanMotion
+from .keypoints import load_keypoint_map
+from .phases import min_jerk
 
 #: The human model inside example-robot-data.
 HUMAN_URDF = "example-robot-data:human_description/robots/human.urdf"

@@ -17,9 +17,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .registry import Registry
-from .robot import RobotModel, RobotState
-from .validation import positive_float
+from ..registry import Registry
+from ..robot import RobotModel, RobotState
+from ..validation import positive_float
 
 REGULARIZATIONS = Registry("regularization")
 

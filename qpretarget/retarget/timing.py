@@ -46,8 +46,8 @@ import numpy.typing as npt
 import pinocchio as pin
 from scipy.ndimage import maximum_filter1d
 
-from .errors import QPRetargetError
-from .robot import RobotModel
+from ..errors import QPRetargetError
+from ..robot import RobotModel
 
 __all__ = [
     "TimingError",

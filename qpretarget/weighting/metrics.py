@@ -48,7 +48,7 @@ Paper defaults (CRAC section 5): :math:`\rho = 1`, :math:`\beta = 2`, :math:`\al
 :math:`\lambda = 0.1`.
 
 Registration: this module registers ``wln`` and ``crac`` in
-:data:`~qpretarget.weighting.REGULARIZATIONS`; it is imported by
+:data:`~qpretarget.weighting.base.REGULARIZATIONS`; it is imported by
 ``qpretarget/strategies/__init__.py`` (which the controller imports): ``weighting.py`` cannot
 import it without a cycle, since this module imports ``weighting.py``.
 """
@@ -60,10 +60,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .errors import ConfigError
-from .robot import RobotModel, RobotState
-from .validation import positive_float
-from .weighting import REGULARIZATIONS, Regularization
+from ..errors import ConfigError
+from ..robot import RobotModel, RobotState
+from ..validation import positive_float
+from .base import REGULARIZATIONS, Regularization
 
 #: CRAC section 5 defaults.
 PAPER_RHO, PAPER_ALPHA, PAPER_BETA, PAPER_DAMPING = 1.0, 50.0, 2.0, 0.1

@@ -43,11 +43,11 @@ from typing import Any
 
 import numpy as np
 
-from .constraints.base import Constraint
-from .errors import ConfigError, close_matches_hint
-from .problem import QPProblem
-from .solvers import ProxSuiteSolver, make_solver
-from .validation import positive_float
+from ..constraints.base import Constraint
+from ..errors import ConfigError, close_matches_hint
+from ..problem import QPProblem
+from ..solvers import ProxSuiteSolver, make_solver
+from ..validation import positive_float
 
 _KEYS = ("enabled", "ratio", "report_tolerance", "solver", "hard")
 #: Bound constraints the fallback never widens by default: the actuators' velocity limits.

@@ -37,11 +37,11 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .controller import Controller
-from .errors import ConfigError, QPRetargetError
+from ..control.controller import Controller
+from ..errors import ConfigError, QPRetargetError
+from ..trajectory import RobotTrajectory
+from ..yamlio import load_yaml
 from .metrics import rmse
-from .trajectory import RobotTrajectory
-from .yamlio import load_yaml
 
 #: Solvers compared when none are named: the native ProxSuite path, then every installed
 #: qpsolvers backend.
@@ -217,8 +217,8 @@ def load_targets(motion: str | Path, *, seconds: float | None = None) -> Motion:
 def _mocap_motion(path: Path, seconds: float | None) -> Motion:
     """A mocap clip, retargeted for each solver by the config's ``retarget:`` section."""
     try:
-        from .motion import load_motion
-        from .retarget import Retargeter
+        from ..motion import load_motion
+        from ..retarget.retargeter import Retargeter
     except ImportError:
         raise ComparisonError(
             f"{path.name}: reading mocap needs the motion pipeline's retargeter "
@@ -493,7 +493,7 @@ def _machine() -> dict[str, str]:
 
 def available_solver_names() -> list[str]:
     """``proxsuite`` (native, warm-started) followed by every installed qpsolvers backend."""
-    from .solvers import installed_qpsolvers
+    from ..solvers import installed_qpsolvers
 
     return [DEFAULT_REFERENCE, *installed_qpsolvers()]
 
@@ -544,7 +544,7 @@ def _run_one(
     base_dir: Path,
     motion: Motion,
 ) -> tuple[SolverRow, RobotTrajectory | None]:
-    from .solvers import installed_qpsolvers, known_qpsolvers
+    from ..solvers import installed_qpsolvers, known_qpsolvers
 
     if name != DEFAULT_REFERENCE and name not in installed_qpsolvers():
         if name in known_qpsolvers():

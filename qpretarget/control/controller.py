@@ -26,15 +26,15 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .constraints import CONSTRAINTS, Constraint
-from .errors import ConfigError, TargetError, close_matches_hint
-from .registry import build_from_spec
-from .robot import ERD_PREFIX, RobotModel, RobotState, load_robot
-from .solvers import make_solver
-from .strategies import STRATEGIES, Strategy, TickProblem
-from .tasks import TASKS, Task
-from .weighting import REGULARIZATIONS, Regularization
-from .yamlio import load_yaml
+from ..constraints import CONSTRAINTS, Constraint
+from ..errors import ConfigError, TargetError, close_matches_hint
+from ..registry import build_from_spec
+from ..robot import ERD_PREFIX, RobotModel, RobotState, load_robot
+from ..solvers import make_solver
+from ..strategies import STRATEGIES, Strategy, TickProblem
+from ..tasks import TASKS, Task
+from ..weighting.base import REGULARIZATIONS, Regularization
+from ..yamlio import load_yaml
 
 TOP_LEVEL_KEYS = (
     "name", "description", "robot", "dt", "level", "strategy", "regularization", "solver",

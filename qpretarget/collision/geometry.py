@@ -60,8 +60,8 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial import ConvexHull
 
-from .errors import ConfigError, UnknownNameError
-from .robot import RobotModel, RobotState
+from ..errors import ConfigError, UnknownNameError
+from ..robot import RobotModel, RobotState
 
 GEOMETRIES = ("convex_hull", "capsule")
 _PRIMITIVES = (coal.Sphere, coal.Box, coal.Cylinder, coal.Capsule, coal.Ellipsoid, coal.Cone)

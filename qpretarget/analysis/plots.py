@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import QPRetargetError
+from ..errors import QPRetargetError
 from .metrics import MetricSeries
 
 #: Resolution of every figure [dots per inch].

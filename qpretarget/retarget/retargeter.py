@@ -11,7 +11,7 @@ each usable offline and one frame at a time:
    robot (Poubel 2014 eq. 1 from the support foot, or Dariush 2009 per-link scaling);
 5. support-phase detection on the person and the transition sequences of Poubel 2014 Table I
    (contact switches, CoM target, swing-foot targets);
-6. one :meth:`Controller.step <qpretarget.controller.Controller.step>` per control tick with the
+6. one :meth:`Controller.step <qpretarget.control.Controller.step>` per control tick with the
    targets of the tasks named in the controller YAML's ``retarget:`` section.
 
 Offline, :meth:`Retargeter.retarget` returns a :class:`~qpretarget.trajectory.RobotTrajectory`
@@ -55,27 +55,27 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from .controller import Controller, StepResult
-from .errors import ConfigError, QPRetargetError, close_matches_hint
-from .motion.calibration import Calibration, calibrate, nearest_rotation, triad, yaw_of
-from .motion.filters import Butterworth, CardinalSpline
-from .motion.human_motion import HumanMotion, MotionError
-from .motion.keypoints import (
+from ..control.controller import Controller, StepResult
+from ..errors import ConfigError, QPRetargetError, close_matches_hint
+from ..motion.calibration import Calibration, calibrate, nearest_rotation, triad, yaw_of
+from ..motion.filters import Butterworth, CardinalSpline
+from ..motion.human_motion import HumanMotion, MotionError
+from ..motion.keypoints import (
     KEYPOINT_NAMES,
     KeypointMap,
     KeypointMapError,
     load_keypoint_map,
     resolve_keypoint_map,
 )
-from .motion.phases import (
+from ..motion.phases import (
     SIDES,
     PhaseThresholds,
     SequencerSettings,
     SupportPhaseDetector,
     SupportSequencer,
 )
-from .motion.scaling import SCALING_METHODS, Scaler, limit_leg_extension
-from .trajectory import RobotTrajectory
+from ..motion.scaling import SCALING_METHODS, Scaler, limit_leg_extension
+from ..trajectory import RobotTrajectory
 
 #: Keys of the ``retarget:`` section.
 RETARGET_KEYS = (
@@ -524,7 +524,7 @@ def whole_body_config(
     Raises:
         ConfigError: Unknown robot, or a robot without two feet.
     """
-    from .robot import load_robot
+    from ..robot import load_robot
 
     model = load_robot(robot)
     kf = model.keyframes
@@ -659,7 +659,7 @@ class Command:
         q: Configuration after the tick (nq,).
         v: Velocity applied during the tick (nv,).
         status: ``ok`` / ``relaxed`` / ``held``.
-        result: The controller's :class:`~qpretarget.controller.StepResult`.
+        result: The controller's :class:`~qpretarget.control.controller.StepResult`.
         phase: Support phase detected on the person (``double``/``left``/``right``, or ``""``).
         support: State of the support sequencer (``""`` without support handling).
     """
@@ -1652,120 +1652,6 @@ def _pose_matrix(R: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------ summary
-def summarize_run(
-    traj: RobotTrajectory, controller: Controller, *, wall_time: float | None = None
-) -> dict[str, Any]:
-    """Per-task RMSE, joint-limit violations, feet drift during contact and timing of a run.
-
-    Args:
-        traj: The run.
-        controller: The controller that produced it (robot model, limits, feet).
-        wall_time: Seconds the run took (for ticks per second).
-
-    Returns:
-        A JSON-serializable dict: ``duration`` [s], ``ticks``, ``ticks_per_second``,
-        ``rmse_mm`` (position tasks), ``joint_limit_violations`` (samples x joints outside the
-        limits by more than 1e-6 rad), ``feet_drift_mm`` (largest displacement of a sole during
-        one of its contact intervals), ``status`` counts, ``phases`` (support-state intervals).
-    """
-    robot = controller.robot
-    q = np.asarray(traj.q, float)
-    T = len(traj.t)
-    out: dict[str, Any] = {
-        "duration": float(traj.t[-1] - traj.t[0]) if T > 1 else 0.0,
-        "ticks": T,
-    }
-    if wall_time:
-        out["ticks_per_second"] = T / wall_time
-        out["wall_time"] = wall_time
-    rmse = {}
-    for name in traj.task_names:
-        tgt = np.asarray(traj.targets[name], float)
-        act = np.asarray(traj.actual[name], float)
-        ok = np.all(np.isfinite(tgt), axis=1)
-        if ok.any():
-            rmse[name] = float(np.sqrt(np.mean(np.sum((tgt[ok] - act[ok]) ** 2, axis=1)))) * 1e3
-    out["rmse_mm"] = rmse
-    qi = robot.joint_q_index
-    lo, hi = robot.q_min[qi], robot.q_max[qi]
-    qj = q[:, qi]
-    viol = (qj < lo - 1e-6) | (qj > hi + 1e-6)
-    out["joint_limit_violations"] = int(viol.sum())
-    if viol.any():
-        worst = np.argmax(np.max(np.maximum(lo - qj, qj - hi), axis=0))
-        out["worst_joint"] = robot.joint_names[int(worst)]
-    drift = {}
-    if traj.contacts is not None and np.asarray(traj.contacts).size:
-        model, data = robot.model, robot.model.createData()
-        contacts = np.asarray(traj.contacts, bool)
-        ids = [robot.frame_id(robot.feet[f].frame) if f in robot.feet else robot.frame_id(f)
-               for f in traj.foot_names]  # fmt: skip
-        soles = np.empty((T, len(ids), 3))
-        for k in range(T):
-            pin.framesForwardKinematics(model, data, q[k])
-            for i, fid in enumerate(ids):
-                soles[k, i] = data.oMf[fid].translation
-        for i, name in enumerate(traj.foot_names):
-            worst = 0.0
-            k = 0
-            while k < T:
-                if contacts[k, i]:
-                    j = k
-                    while j < T and contacts[j, i]:
-                        j += 1
-                    d = np.linalg.norm(soles[k:j, i] - soles[k, i], axis=1)
-                    worst = max(worst, float(d.max()))
-                    k = j
-                else:
-                    k += 1
-            drift[name] = worst * 1e3
-    out["feet_drift_mm"] = drift
-    statuses, counts = np.unique(np.asarray(traj.status, dtype=str), return_counts=True)
-    out["status"] = {str(s): int(c) for s, c in zip(statuses, counts, strict=True)}
-    support = traj.extra.get("support_state")
-    if support is not None and len(support) and str(support[0]):
-        changes = [0] + [k for k in range(1, T) if support[k] != support[k - 1]]
-        out["support_states"] = [(float(traj.t[k]), str(support[k])) for k in changes]
-    if traj.solve_time is not None:
-        st = np.asarray(traj.solve_time, float)
-        out["solve_time_ms"] = {
-            "median": float(np.median(st)) * 1e3,
-            "p95": float(np.percentile(st, 95)) * 1e3,
-        }
-    return out
-
-
-def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
-    """Readable text of :func:`summarize_run`'s dict."""
-    lines = []
-    if title:
-        lines.append(title)
-    tps = summary.get("ticks_per_second")
-    speed = f", {tps:.0f} ticks/s" if tps else ""
-    lines.append(f"duration     {summary['duration']:.2f} s, {summary['ticks']} ticks{speed}")
-    if "solve_time_ms" in summary:
-        s = summary["solve_time_ms"]
-        lines.append(f"QP solve     median {s['median']:.3f} ms, p95 {s['p95']:.3f} ms")
-    lines.append("tracking RMSE per task (target vs reached):")
-    for name, v in summary["rmse_mm"].items():
-        lines.append(f"  {name:16s} {v:8.1f} mm")
-    viol = summary["joint_limit_violations"]
-    lines.append(
-        f"joint limits {viol} violation(s)"
-        + (f" (worst joint {summary['worst_joint']})" if viol else "")
-    )
-    if summary.get("feet_drift_mm"):
-        drift = ", ".join(f"{k} {v:.3f} mm" for k, v in summary["feet_drift_mm"].items())
-        lines.append(f"feet drift   {drift} (largest sole motion while in contact)")
-    st = summary.get("status", {})
-    lines.append("ticks        " + ", ".join(f"{k} {v}" for k, v in st.items()))
-    phases = summary.get("support_states")
-    if phases:
-        steps = sum(1 for _, s in phases if s.startswith("lower_"))
-        lines.append(f"support      {len(phases)} state changes, {steps} step(s) placed")
-    return "\n".join(lines)
-
-
 def iter_frames(motion: HumanMotion) -> Iterable[tuple[float, np.ndarray, np.ndarray | None]]:
     """``(t, positions (J, 3), orientations (J, 3, 3) or None)`` of every frame (for ``push``)."""
     for k in range(len(motion)):
@@ -1802,10 +1688,8 @@ __all__ = [
     "Retargeter",
     "TaskBinding",
     "default_robot_keypoints",
-    "format_summary",
     "iter_frames",
     "retarget_motion",
-    "summarize_run",
     "timed_retarget",
     "whole_body_config",
 ]

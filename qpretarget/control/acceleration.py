@@ -55,15 +55,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pinocchio as pin
 
-from .errors import ConfigError, TargetError
-from .registry import build_from_spec
-from .robot import RobotState
-from .solvers import make_solver
-from .strategies import STRATEGIES, Strategy, StrategyResult, TickProblem
-from .tasks import CostBlock, Task
-from .tasks.com import ComTask
-from .tasks.posture import DampingTask, PostureTask
-from .validation import positive_float
+from ..errors import ConfigError, TargetError
+from ..registry import build_from_spec
+from ..robot import RobotState
+from ..solvers import make_solver
+from ..strategies import STRATEGIES, Strategy, StrategyResult, TickProblem
+from ..tasks import CostBlock, Task
+from ..tasks.com import ComTask
+from ..tasks.posture import DampingTask, PostureTask
+from ..validation import positive_float
 
 if TYPE_CHECKING:  # pragma: no cover
     from .controller import Controller, StepResult
@@ -125,7 +125,7 @@ def _rebuild_strategy(controller: Controller) -> Strategy:
 
 
 class AccelerationLevel:
-    r"""CRAC at acceleration level for a :class:`~qpretarget.controller.Controller`.
+    r"""CRAC at acceleration level for a :class:`~qpretarget.control.controller.Controller`.
 
     Built by the controller when its YAML says ``level: acceleration``; ``Controller.step``
     returns :meth:`step`. The controller's :attr:`strategy` solves the acceleration QP, a second

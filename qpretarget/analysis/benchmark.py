@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from .controller import Controller
-from .yamlio import load_yaml
+from ..control.controller import Controller
+from ..yamlio import load_yaml
 
 
 def machine_info() -> dict[str, Any]:

@@ -9,7 +9,7 @@ paper's problem (Tosun eq. 4)
 
 by Gauss-Newton steps (one QP per step, the ``joint_limits`` constraint as hard bounds, the
 controller's damping as Levenberg-Marquardt term). Online, the same controller takes one QP step
-per tick. Both reuse :meth:`qpretarget.controller.Controller.step`; there is no second QP path.
+per tick. Both reuse :meth:`~qpretarget.control.Controller.step`; there is no second QP path.
 
 Helpers extract source chains from motion capture (:func:`arm_chain`: shoulder, elbow, wrist,
 hand key-points expressed in the torso's axes, optionally projected on an anatomical plane) and
@@ -26,13 +26,13 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import numpy.typing as npt
 
-from .errors import ConfigError, TargetError, close_matches_hint
-from .robot import RobotModel, RobotState
-from .tasks.chain_shape import ChainShapeTask, ShapeErrors
+from ..errors import ConfigError, TargetError, close_matches_hint
+from ..robot import RobotModel, RobotState
+from ..tasks.chain_shape import ChainShapeTask, ShapeErrors
 
 if TYPE_CHECKING:
-    from .controller import Controller
-    from .motion import HumanMotion
+    from ..control.controller import Controller
+    from ..motion import HumanMotion
 
 #: Arm key-points of :mod:`qpretarget.motion` key-point maps, from the base of the chain.
 ARM_POINTS = ("shoulder", "elbow", "wrist", "hand")

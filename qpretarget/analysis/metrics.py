@@ -18,7 +18,7 @@ section 5:
 * solve-time statistics.
 
 :func:`compute_series` returns the time series (:class:`MetricSeries`, used by the figures of
-:mod:`qpretarget.plots`), :func:`summarize` turns them into a JSON-serializable dict and
+:mod:`qpretarget.analysis.plots`), :func:`summarize` turns them into a JSON-serializable dict and
 :func:`compute_metrics` does both. The building blocks (:func:`rmse`,
 :func:`joint_limit_violations`, :func:`signed_distance_to_polygon`, :func:`derivative_peaks`,
 :func:`average_absolute_power`, ...) are pure functions on arrays.
@@ -36,13 +36,13 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from .errors import ConfigError, QPRetargetError, close_matches_hint
-from .geometry2d import convex_hull_2d  # noqa: F401 (re-exported)
-from .robot import RobotModel
-from .trajectory import RobotTrajectory, TrajectoryFormatError
+from ..errors import ConfigError, QPRetargetError, close_matches_hint
+from ..geometry2d import convex_hull_2d  # noqa: F401 (re-exported)
+from ..robot import RobotModel
+from ..trajectory import RobotTrajectory, TrajectoryFormatError
 
 #: Version tag written in ``metrics.json``.
-METRICS_FORMAT = "qpretarget.metrics/1"
+METRICS_FORMAT = "qpretarget.analysis.metrics/1"
 
 #: Joint positions further than this outside ``[q_min, q_max]`` count as a violation [rad]. It is
 #: far above the solvers' tolerances (a constrained run stays within ~1e-9 rad) and far below any
@@ -347,7 +347,7 @@ class GeometryPairDistances:
     """Distances between pairs of bodies of a given pinocchio ``GeometryModel`` of convex shapes.
 
     For geometry that is not the robot's own (tests, extra bodies); the robot's links go through
-    :class:`LinkPairDistances` (the shared :mod:`qpretarget.collision` model). Each name stands for
+    :class:`LinkPairDistances` (the shared :mod:`~qpretarget.collision` model). Each name stands for
     every geometry object of that name or attached to that frame; the distance of a pair is the
     smallest distance between their objects (negative when they interpenetrate, coal's signed
     distance).
@@ -411,21 +411,21 @@ class GeometryPairDistances:
 class LinkPairDistances:
     """Exact distances of robot link pairs, from the shared collision model (convex hulls).
 
-    A thin offline wrapper of :class:`qpretarget.collision.CollisionModel` (broad phase off):
+    A thin offline wrapper of :class:`~qpretarget.collision.CollisionModel` (broad phase off):
     the same geometry the ``self_collision`` constraint uses in the loop.
 
     Args:
         robot: the robot.
         pairs: link-name pairs; a key-point name (``left_hand``) is resolved to the link that
             carries its frame's geometry.
-        geometry: ``convex_hull`` or ``capsule`` (see :mod:`qpretarget.collision`).
+        geometry: ``convex_hull`` or ``capsule`` (see :mod:`qpretarget.collision.geometry`).
     """
 
     def __init__(
         self, robot: RobotModel, pairs: Sequence[tuple[str, str]], *, geometry: str = "convex_hull"
     ) -> None:
-        from .collision import CollisionModel
-        from .robot import RobotState
+        from ..collision.geometry import CollisionModel
+        from ..robot import RobotState
 
         resolved = [(self._link(robot, a), self._link(robot, b)) for a, b in pairs]
         self.robot = robot
@@ -436,9 +436,9 @@ class LinkPairDistances:
     @staticmethod
     def _link(robot: RobotModel, name: str) -> str:
         """A key-point or frame name -> the link (body frame) holding its collision geometry."""
-        from .collision import link_shapes
-        from .constraints.self_collision import resolve_link
-        from .errors import UnknownNameError
+        from ..collision.geometry import link_shapes
+        from ..constraints.self_collision import resolve_link
+        from ..errors import UnknownNameError
 
         shapes = link_shapes(robot)
         try:

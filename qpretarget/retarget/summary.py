@@ -1,0 +1,127 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The run summary printed by ``qpretarget retarget`` and ``qpretarget demo``."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from ..control.controller import Controller
+from ..trajectory import RobotTrajectory
+
+
+def summarize_run(
+    traj: RobotTrajectory, controller: Controller, *, wall_time: float | None = None
+) -> dict[str, Any]:
+    """Per-task RMSE, joint-limit violations, feet drift during contact and timing of a run.
+
+    Args:
+        traj: The run.
+        controller: The controller that produced it (robot model, limits, feet).
+        wall_time: Seconds the run took (for ticks per second).
+
+    Returns:
+        A JSON-serializable dict: ``duration`` [s], ``ticks``, ``ticks_per_second``,
+        ``rmse_mm`` (position tasks), ``joint_limit_violations`` (samples x joints outside the
+        limits by more than 1e-6 rad), ``feet_drift_mm`` (largest displacement of a sole during
+        one of its contact intervals), ``status`` counts, ``phases`` (support-state intervals).
+    """
+    robot = controller.robot
+    q = np.asarray(traj.q, float)
+    T = len(traj.t)
+    out: dict[str, Any] = {
+        "duration": float(traj.t[-1] - traj.t[0]) if T > 1 else 0.0,
+        "ticks": T,
+    }
+    if wall_time:
+        out["ticks_per_second"] = T / wall_time
+        out["wall_time"] = wall_time
+    rmse = {}
+    for name in traj.task_names:
+        tgt = np.asarray(traj.targets[name], float)
+        act = np.asarray(traj.actual[name], float)
+        ok = np.all(np.isfinite(tgt), axis=1)
+        if ok.any():
+            rmse[name] = float(np.sqrt(np.mean(np.sum((tgt[ok] - act[ok]) ** 2, axis=1)))) * 1e3
+    out["rmse_mm"] = rmse
+    qi = robot.joint_q_index
+    lo, hi = robot.q_min[qi], robot.q_max[qi]
+    qj = q[:, qi]
+    viol = (qj < lo - 1e-6) | (qj > hi + 1e-6)
+    out["joint_limit_violations"] = int(viol.sum())
+    if viol.any():
+        worst = np.argmax(np.max(np.maximum(lo - qj, qj - hi), axis=0))
+        out["worst_joint"] = robot.joint_names[int(worst)]
+    drift = {}
+    if traj.contacts is not None and np.asarray(traj.contacts).size:
+        model, data = robot.model, robot.model.createData()
+        contacts = np.asarray(traj.contacts, bool)
+        ids = [robot.frame_id(robot.feet[f].frame) if f in robot.feet else robot.frame_id(f)
+               for f in traj.foot_names]  # fmt: skip
+        soles = np.empty((T, len(ids), 3))
+        for k in range(T):
+            pin.framesForwardKinematics(model, data, q[k])
+            for i, fid in enumerate(ids):
+                soles[k, i] = data.oMf[fid].translation
+        for i, name in enumerate(traj.foot_names):
+            worst = 0.0
+            k = 0
+            while k < T:
+                if contacts[k, i]:
+                    j = k
+                    while j < T and contacts[j, i]:
+                        j += 1
+                    d = np.linalg.norm(soles[k:j, i] - soles[k, i], axis=1)
+                    worst = max(worst, float(d.max()))
+                    k = j
+                else:
+                    k += 1
+            drift[name] = worst * 1e3
+    out["feet_drift_mm"] = drift
+    statuses, counts = np.unique(np.asarray(traj.status, dtype=str), return_counts=True)
+    out["status"] = {str(s): int(c) for s, c in zip(statuses, counts, strict=True)}
+    support = traj.extra.get("support_state")
+    if support is not None and len(support) and str(support[0]):
+        changes = [0] + [k for k in range(1, T) if support[k] != support[k - 1]]
+        out["support_states"] = [(float(traj.t[k]), str(support[k])) for k in changes]
+    if traj.solve_time is not None:
+        st = np.asarray(traj.solve_time, float)
+        out["solve_time_ms"] = {
+            "median": float(np.median(st)) * 1e3,
+            "p95": float(np.percentile(st, 95)) * 1e3,
+        }
+    return out
+
+
+def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
+    """Readable text of :func:`summarize_run`'s dict."""
+    lines = []
+    if title:
+        lines.append(title)
+    tps = summary.get("ticks_per_second")
+    speed = f", {tps:.0f} ticks/s" if tps else ""
+    lines.append(f"duration     {summary['duration']:.2f} s, {summary['ticks']} ticks{speed}")
+    if "solve_time_ms" in summary:
+        s = summary["solve_time_ms"]
+        lines.append(f"QP solve     median {s['median']:.3f} ms, p95 {s['p95']:.3f} ms")
+    lines.append("tracking RMSE per task (target vs reached):")
+    for name, v in summary["rmse_mm"].items():
+        lines.append(f"  {name:16s} {v:8.1f} mm")
+    viol = summary["joint_limit_violations"]
+    lines.append(
+        f"joint limits {viol} violation(s)"
+        + (f" (worst joint {summary['worst_joint']})" if viol else "")
+    )
+    if summary.get("feet_drift_mm"):
+        drift = ", ".join(f"{k} {v:.3f} mm" for k, v in summary["feet_drift_mm"].items())
+        lines.append(f"feet drift   {drift} (largest sole motion while in contact)")
+    st = summary.get("status", {})
+    lines.append("ticks        " + ", ".join(f"{k} {v}" for k, v in st.items()))
+    phases = summary.get("support_states")
+    if phases:
+        steps = sum(1 for _, s in phases if s.startswith("lower_"))
+        lines.append(f"support      {len(phases)} state changes, {steps} step(s) placed")
+    return "\n".join(lines)
