@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Sequence
+from pathlib import Path
 
 
 def close_matches_hint(name: str, known: Sequence[str], n: int = 3) -> str:
@@ -107,3 +108,48 @@ class SolverError(QPRetargetError, RuntimeError):
 
 class SolverNotInstalledError(SolverError, ImportError):
     """A QP solver backend is known to qpretarget but its package is not installed."""
+
+
+class MissingDependencyError(QPRetargetError, ImportError):
+    """An optional dependency (a ``pip`` extra of qpretarget) is not installed.
+
+    Attributes:
+        extra: the extra that installs it, e.g. ``"plot"``.
+    """
+
+    def __init__(self, message: str, *, extra: str = "") -> None:
+        super().__init__(message)
+        self.extra = extra
+
+
+def source_checkout() -> Path | None:
+    """The checkout qpretarget runs from (editable or in-place install), or ``None``.
+
+    A source checkout is recognised by a ``pyproject.toml`` beside the package directory; an
+    install from a wheel (site-packages) has none.
+    """
+    root = Path(__file__).resolve().parent.parent
+    return root if (root / "pyproject.toml").is_file() else None
+
+
+def install_hint(extra: str, what: str) -> str:
+    """One sentence telling how to install the optional ``extra`` needed for ``what``.
+
+    Args:
+        extra: name of the extra in ``pyproject.toml`` (``plot``, ``viz``, ``mocap``, ...).
+        what: what needs it, e.g. ``"drawing figures"`` (the sentence starts with it).
+
+    Returns:
+        ``'{what} needs the `{extra}` extra: pip install -e "/path/to/checkout[extra]"'`` when
+        qpretarget runs from a source checkout (the package is on no index), else
+        ``'... pip install "qpretarget[extra]"'``.
+    """
+    root = source_checkout()
+    target = f"{root}[{extra}]" if root is not None else f"qpretarget[{extra}]"
+    cmd = f'pip install -e "{target}"' if root is not None else f'pip install "{target}"'
+    return f"{what} needs the `{extra}` extra: {cmd}"
+
+
+def missing_dependency(extra: str, what: str) -> MissingDependencyError:
+    """A :class:`MissingDependencyError` whose message is :func:`install_hint` (raise it)."""
+    return MissingDependencyError(install_hint(extra, what), extra=extra)

@@ -210,8 +210,9 @@ def e_step(
     use_n = Sn is not None and Vn is not None and normal_weight > 0
     if M == 0 or N == 0:
         raise ValueError("empty template or cloud")
-    if use_n:
-        Sn, Vn = normal_scale * Sn, normal_scale * Vn  # type: ignore[operator]
+    # Scaled normals (zeros when the normal stage is off, so the arrays are always arrays).
+    Sn = normal_scale * np.asarray(Sn, float) if use_n else np.zeros((N, 3))
+    Vn = normal_scale * np.asarray(Vn, float) if use_n else np.zeros((Mtot, 3))
     Afull = V
     if use_n:
         sq = math.sqrt(normal_weight)
@@ -226,13 +227,13 @@ def e_step(
     A = Afull[idx_act]
     log_in = math.log1p(-mu) - math.log(M) + lognorm
     log_out = math.log(mu / N) if mu > 0 else -np.inf
-    P1 = np.zeros(Mtot)
-    Px = np.zeros((Mtot, 3))
-    Pn = np.zeros((Mtot, 3)) if use_n else None
+    P1: np.ndarray = np.zeros(Mtot)
+    Px: np.ndarray = np.zeros((Mtot, 3))
+    Pn: np.ndarray | None = np.zeros((Mtot, 3)) if use_n else None
     nll = 0.0
     wS2 = wN2 = Np = 0.0
     s2 = np.einsum("na,na->n", S, S)
-    n2 = np.einsum("na,na->n", Sn, Sn) if use_n else None
+    n2 = np.einsum("na,na->n", Sn, Sn)
     if mode == "dense":
         for lo in range(0, N, chunk):
             Bc = B[lo : lo + chunk]
@@ -253,7 +254,7 @@ def e_step(
             wS2 += float(w @ s2[lo : lo + chunk])
             if use_n:
                 Pn[idx_act] += np.einsum("nm,na->ma", post, Sn[lo : lo + chunk])  # type: ignore[index]
-                wN2 += float(w @ n2[lo : lo + chunk])  # type: ignore[index]
+                wN2 += float(w @ n2[lo : lo + chunk])
             Np += float(w.sum())
     elif mode == "kdtree":
         from scipy.spatial import cKDTree
@@ -283,8 +284,8 @@ def e_step(
         Px = np.stack([np.bincount(m, pf * S[rep, c], Mtot) for c in range(3)], axis=1)
         wS2 = float(w @ s2)
         if use_n:
-            Pn = np.stack([np.bincount(m, pf * Sn[rep, c], Mtot) for c in range(3)], axis=1)  # type: ignore[index]
-            wN2 = float(w @ n2)  # type: ignore[operator]
+            Pn = np.stack([np.bincount(m, pf * Sn[rep, c], Mtot) for c in range(3)], axis=1)
+            wN2 = float(w @ n2)
         Np = float(w.sum())
     else:
         raise ConfigError(f"estep must be 'kdtree' or 'dense', got {mode!r}.", path="em.estep")
@@ -400,6 +401,10 @@ class CloudRetargeter:
             )
         )
         self.model = self.template.model
+        # Joint-centre estimate (set by calibration): prior mean, information, current value.
+        self._centre_mean: np.ndarray = np.zeros(0)
+        self._centre_info: np.ndarray = np.zeros((0, 0))
+        self._centre_x: np.ndarray | None = None
         make_solver(cfg.solver, path="solver")  # validate now
         self._solver = make_solver(cfg.solver, path="solver")
         self._solver_restore = make_solver(cfg.solver, path="solver")
@@ -474,7 +479,7 @@ class CloudRetargeter:
     # ------------------------------------------------------------------ helpers
     def _prepare(
         self, frame: CloudFrame | np.ndarray, rng_seed: int
-    ) -> tuple[np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         inp = self.config.input
         pts = frame.points if isinstance(frame, CloudFrame) else np.asarray(frame, float)
         nrm = frame.normals if isinstance(frame, CloudFrame) else None
@@ -930,7 +935,7 @@ class CloudRetargeter:
             # CENTRE_TOLERANCE.
             if max(move, base) < em.tolerance and shift < CENTRE_TOLERANCE:
                 break
-        if Hqq is not None:
+        if Hqq is not None and Hqe is not None and Hee is not None:
             # This frame's information on the centres, the pose marginalized (at the last
             # linearization; the temporal term counts as the pose's prior).
             A = Hqq.copy()

@@ -26,11 +26,11 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
-from ..errors import ConfigError, QPRetargetError
+from ..errors import ConfigError, QPRetargetError, missing_dependency
 
 
 class CloudFormatError(QPRetargetError, ValueError):
@@ -82,7 +82,8 @@ class PinholeIntrinsics:
             raise ConfigError(
                 f"focal lengths must be positive, got fx={vals[0]}, fy={vals[1]}.", path=path
             )
-        return cls(*vals, width=int(w), height=int(h))
+        fx, fy, cx, cy = vals
+        return cls(fx, fy, cx, cy, width=int(w), height=int(h))
 
 
 @dataclass
@@ -143,6 +144,26 @@ class CloudSequence:
 
 
 # ------------------------------------------------------------------------------ depth images
+@overload
+def depth_to_points(
+    depth: np.ndarray,
+    intrinsics: PinholeIntrinsics,
+    camera_pose: np.ndarray | None = None,
+    *,
+    return_pixels: Literal[False] = False,
+) -> np.ndarray: ...
+
+
+@overload
+def depth_to_points(
+    depth: np.ndarray,
+    intrinsics: PinholeIntrinsics,
+    camera_pose: np.ndarray | None = None,
+    *,
+    return_pixels: Literal[True],
+) -> tuple[np.ndarray, np.ndarray]: ...
+
+
 def depth_to_points(
     depth: np.ndarray,
     intrinsics: PinholeIntrinsics,
@@ -548,9 +569,7 @@ def _read_directory(path: Path, rate, intrinsics, camera_pose, depth_scale) -> C
             try:
                 from PIL import Image
             except ImportError:
-                raise CloudFormatError(
-                    "reading PNG depth images needs pillow: pip install pillow"
-                ) from None
+                raise missing_dependency("plot", "reading PNG depth images (Pillow)") from None
             if intrinsics is None:
                 raise CloudFormatError(
                     f"{src}: PNG depth images need `input.intrinsics: [fx, fy, cx, cy]` in the "

@@ -55,17 +55,17 @@ def look_at(
     eye: Sequence[float], target: Sequence[float], up: Sequence[float] = (0, 0, 1)
 ) -> np.ndarray:
     """Camera-to-world pose (4, 4) of a camera at ``eye`` looking at ``target`` (OpenCV axes)."""
-    eye, target, up = (np.asarray(x, float) for x in (eye, target, up))
-    z = target - eye
+    eye_w, target_w, up_w = (np.asarray(a, float) for a in (eye, target, up))
+    z = target_w - eye_w
     z /= np.linalg.norm(z)
-    x = np.cross(z, up)
+    x = np.cross(z, up_w)
     if np.linalg.norm(x) < 1e-9:
         raise ConfigError("look_at: the viewing direction is parallel to `up`.")
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     T = np.eye(4)
     T[:3, :3] = np.stack([x, y, z], axis=1)
-    T[:3, 3] = eye
+    T[:3, 3] = eye_w
     return T
 
 

@@ -177,13 +177,13 @@ def segments_of_joints(robot: RobotModel) -> tuple[np.ndarray, tuple[str, ...]]:
         if seg not in names:
             names.append(seg)
         key_seg[j] = names.index(seg)
-    seg = np.zeros(model.njoints, dtype=int)
+    segment = np.zeros(model.njoints, dtype=int)
     for j in range(1, model.njoints):
         i = j
         while i > 0 and i not in key_seg:
             i = model.parents[i]
-        seg[j] = key_seg.get(i, 0)
-    return seg, tuple(names)
+        segment[j] = key_seg.get(i, 0)
+    return segment, tuple(names)
 
 
 #: Joints within this distance of an articulation's first joint move with it [m, robot scale].

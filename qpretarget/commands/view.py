@@ -13,7 +13,7 @@ HELP = """examples:
   qpretarget view walk_g1.npz --port 0              any free port
   qpretarget view walk_g1.npz --host 0.0.0.0        reachable from other machines
 
-The page is served on http://HOST:PORT; press Ctrl-C to stop. Needs `pip install qpretarget[viz]`.
+The page is served on http://HOST:PORT; press Ctrl-C to stop. Needs the `viz` extra.
 """
 
 

@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 """Seeing a motion: robot meshes, an interactive browser viewer (viser) and offscreen rendering.
 
-The viewer needs the optional ``viz`` extra (``pip install qpretarget[viz]``); rendering needs
-matplotlib and Pillow (``qpretarget[plot]``). The core package imports neither.
+The viewer needs the optional ``viz`` extra; rendering needs matplotlib and Pillow (the ``plot``
+extra). The core package imports neither; a missing one raises
+:class:`~qpretarget.errors.MissingDependencyError` with the install command
+(:func:`~qpretarget.errors.install_hint`).
 """

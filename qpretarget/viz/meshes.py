@@ -1,20 +1,23 @@
 # SPDX-License-Identifier: Apache-2.0
 """Robot link meshes from the URDF (visual or collision), loaded once, posed by pinocchio.
 
-Meshes are read with trimesh (a dependency of the ``viz`` extra) from the files the URDF names
-(``package://`` URIs resolved in example-robot-data's share directory); primitives (box, sphere,
-cylinder, capsule) become trimesh primitives. ``simplify=True`` replaces each mesh by its convex
-hull (tens to hundreds of faces instead of thousands), which the offscreen renderer draws.
+Meshes are read with trimesh (``.dae`` through pycollada; both in the ``viz`` extra) from the files
+the URDF names (``package://`` URIs resolved in example-robot-data's share directory); primitives
+(box, sphere, cylinder, capsule) become trimesh primitives. ``simplify=True`` replaces each mesh by
+its convex hull (tens to hundreds of faces instead of thousands), which the offscreen renderer
+draws.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from ..errors import MissingDependencyError, missing_dependency
 from ..robot import RobotModel
 from ..robots import share_directory
 
@@ -44,13 +47,24 @@ def _trimesh():  # noqa: ANN202
     try:
         import trimesh
     except ImportError:  # pragma: no cover - depends on the environment
-        from ..errors import QPRetargetError
-
-        raise QPRetargetError(
-            "robot meshes need trimesh: install the viewer extra with "
-            "`pip install qpretarget[viz]`."
-        ) from None
+        raise missing_dependency("viz", "drawing robot meshes (trimesh)") from None
     return trimesh
+
+
+def _require_collada(path: Path) -> None:
+    """Raise the install hint when ``path`` is a COLLADA file and pycollada is missing.
+
+    trimesh reads ``.dae`` (Romeo, iCub) only through pycollada; without it every mesh would be
+    silently dropped and the robot drawn empty.
+    """
+    if path.suffix.lower() != ".dae":
+        return
+    try:
+        import collada  # noqa: F401
+    except ImportError:
+        raise missing_dependency(
+            "viz", f"reading COLLADA meshes such as {path.name} (pycollada)"
+        ) from None
 
 
 def _coarse_hull(mesh, max_points: int):  # noqa: ANN001, ANN202
@@ -98,6 +112,14 @@ def _resolve_uri(uri: str, urdf_dir: Path) -> Path:
     return p if p.is_absolute() else urdf_dir / p
 
 
+def _numbers(elem: Any, key: str) -> list[float]:
+    """The numbers of the XML attribute ``key`` (ValueError when it is missing)."""
+    text = elem.get(key)
+    if text is None:
+        raise ValueError(f"<{elem.tag}> has no {key!r} attribute")
+    return [float(x) for x in text.split()]
+
+
 def _origin(elem) -> pin.SE3:  # noqa: ANN001
     o = elem.find("origin")
     if o is None:
@@ -141,22 +163,25 @@ def load_link_meshes(
             try:
                 if g.tag == "mesh":
                     path = _resolve_uri(g.get("filename", ""), urdf.parent)
+                    _require_collada(path)
                     mesh = trimesh.load(str(path), force="mesh", process=False)
                     scale = g.get("scale")
                     if scale:
                         mesh.apply_scale(np.array([float(x) for x in scale.split()]))
                 elif g.tag == "box":
-                    mesh = trimesh.creation.box(extents=[float(x) for x in g.get("size").split()])
+                    mesh = trimesh.creation.box(extents=_numbers(g, "size"))
                 elif g.tag == "sphere":
-                    mesh = trimesh.creation.icosphere(subdivisions=2, radius=float(g.get("radius")))
+                    mesh = trimesh.creation.icosphere(
+                        subdivisions=2, radius=_numbers(g, "radius")[0]
+                    )
                 elif g.tag == "cylinder":
-                    mesh = trimesh.creation.cylinder(
-                        radius=float(g.get("radius")), height=float(g.get("length")), sections=16
-                    )
+                    radius, length = _numbers(g, "radius")[0], _numbers(g, "length")[0]
+                    mesh = trimesh.creation.cylinder(radius=radius, height=length, sections=16)
                 elif g.tag == "capsule":
-                    mesh = trimesh.creation.capsule(
-                        radius=float(g.get("radius")), height=float(g.get("length")), count=[8, 8]
-                    )
+                    radius, length = _numbers(g, "radius")[0], _numbers(g, "length")[0]
+                    mesh = trimesh.creation.capsule(radius=radius, height=length, count=[8, 8])
+            except MissingDependencyError:
+                raise
             except Exception:  # an unreadable mesh is skipped: a viewer must still open
                 mesh = None
             if mesh is None or len(mesh.faces) == 0:
@@ -166,9 +191,9 @@ def load_link_meshes(
             color = (0.70, 0.72, 0.76, 1.0)
             mat = el.find("material/color")
             if mat is not None and mat.get("rgba"):
-                rgba = [float(x) for x in mat.get("rgba").split()]
+                rgba = _numbers(mat, "rgba")
                 if len(rgba) == 4 and rgba[3] > 0:
-                    color = tuple(rgba)
+                    color = (rgba[0], rgba[1], rgba[2], rgba[3])
             out.append(
                 LinkMesh(
                     name=f"{lname}_{k}",
@@ -176,7 +201,7 @@ def load_link_meshes(
                     placement=frame.placement * _origin(el),
                     vertices=np.asarray(mesh.vertices, dtype=float),
                     faces=np.asarray(mesh.faces, dtype=np.int64),
-                    color=color,  # type: ignore[arg-type]
+                    color=color,
                 )
             )
     return out

@@ -16,11 +16,12 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from ..errors import QPRetargetError
+from ..errors import QPRetargetError, missing_dependency
 from ..trajectory import RobotTrajectory
 from .meshes import LinkMesh, load_link_meshes
 from .skeleton import place_beside, skeleton_segments
@@ -46,9 +47,7 @@ def _require_plot():  # noqa: ANN202
         import matplotlib.pyplot as plt
         from PIL import Image
     except ImportError:  # pragma: no cover
-        raise QPRetargetError(
-            "rendering needs matplotlib and Pillow: `pip install qpretarget[plot]`."
-        ) from None
+        raise missing_dependency("plot", "rendering (matplotlib and Pillow)") from None
     return plt, Image
 
 
@@ -239,7 +238,8 @@ def render_run(
         try:
             import imageio.v2 as imageio
 
-            with imageio.get_writer(out, fps=fps) as w:
+            writer: Any = imageio.get_writer(out, fps=fps)  # the ffmpeg writer (append_data)
+            with writer as w:
                 for f in frames:
                     w.append_data(np.asarray(f))
         except Exception as exc:

@@ -11,7 +11,7 @@ import shutil
 import time
 from pathlib import Path
 
-from ..errors import QPRetargetError
+from ..errors import QPRetargetError, missing_dependency
 
 CHROMIUM_ARGS = (
     "--headless=new", "--no-sandbox", "--disable-gpu", "--use-gl=angle", "--use-angle=swiftshader",
@@ -26,7 +26,7 @@ def headless_chrome(width: int = 1000, height: int = 700):  # noqa: ANN201
         from selenium import webdriver
         from selenium.webdriver.chrome.service import Service
     except ImportError:
-        raise QPRetargetError("screenshots need selenium: `pip install selenium`.") from None
+        raise missing_dependency("test", "screenshots (selenium)") from None
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     driver_path = shutil.which("chromedriver")
     if not (chromium and driver_path):

@@ -8,7 +8,7 @@ points), a timeline with play/pause and speed, and the numbers of the current fr
 ``qpretarget view CONFIG.yaml`` shows the reference posture with key-point frames, the collision
 geometry the controller uses and its pairs. :class:`LiveViewer` streams a running controller.
 
-viser is an optional dependency (``pip install qpretarget[viz]``).
+viser is an optional dependency (the ``viz`` extra, see :func:`qpretarget.errors.install_hint`).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from ..errors import QPRetargetError
+from ..errors import QPRetargetError, missing_dependency
 from ..robot import RobotModel
 from .meshes import load_link_meshes
 from .skeleton import place_beside, skeleton_segments
@@ -37,9 +37,7 @@ def _viser():  # noqa: ANN202
     try:
         import viser
     except ImportError:
-        raise ViewerError(
-            "the viewer needs viser: install the extra with `pip install qpretarget[viz]`."
-        ) from None
+        raise missing_dependency("viz", "the viewer (viser)") from None
     return viser
 
 
@@ -450,8 +448,9 @@ class LiveViewer:
 
         _viser()  # fail early, in this process, when the extra is missing
         nq = controller.robot.nq
-        self._shm = shared_memory.SharedMemory(create=True, size=8 * (nq + 2))
-        self._flags = np.ndarray((nq + 2,), dtype=float, buffer=self._shm.buf)
+        shm = shared_memory.SharedMemory(create=True, size=8 * (nq + 2))
+        self._shm: shared_memory.SharedMemory | None = shm
+        self._flags: Any = np.ndarray((nq + 2,), dtype=float, buffer=shm.buf)
         self._flags[:] = 0.0
         self._buf = self._flags[1:]  # [counter, q...] (seqlock, see _read_latest)
         self._q = self._buf[1:]
@@ -461,7 +460,7 @@ class LiveViewer:
         base = getattr(controller, "base_dir", None)
         cmd = [sys.executable, "-m", "qpretarget.viz.viewer",
                "--robot", json.dumps(controller.config["robot"]), "--host", host,
-               "--port", str(port), "--shm", self._shm.name, "--nq", str(nq),
+               "--port", str(port), "--shm", shm.name, "--nq", str(nq),
                "--max-rate", str(float(max_rate))]  # fmt: skip
         if base:
             cmd += ["--base-dir", str(base)]
@@ -514,7 +513,7 @@ class LiveViewer:
             proc.stdout.close()
         shm = getattr(self, "_shm", None)
         if shm is not None:
-            self._flags = self._buf = self._q = None  # type: ignore[assignment]
+            self._flags = self._buf = self._q = None
             shm.close()
             with contextlib.suppress(FileNotFoundError):
                 shm.unlink()

@@ -1,12 +1,15 @@
 # SPDX-License-Identifier: Apache-2.0
 """The browser viewer: served on a free localhost port, drawn in headless Chromium, port handling.
 
-Needs the `viz` extra (viser, selenium) and Debian's chromium + chromium-driver, which .ci/run
-installs. A missing piece is a test failure, not a skip: the issue asks CI to install them.
+Needs the `viz` extra (viser, selenium) and Debian's chromium + chromium-driver. .ci/run installs
+them and sets CI=true: there a missing browser is a test failure. Elsewhere the browser test skips
+with the apt-get line to run.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
 import socket
 
 import numpy as np
@@ -23,7 +26,27 @@ def short_run(make_run):
     return make_run(1.0)
 
 
+APT_LINE = "sudo apt-get install chromium chromium-driver"
+
+
+def require_browser() -> None:
+    """Skip (outside CI) or fail (CI=true) when headless Chromium or chromedriver is missing."""
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    missing = [
+        n
+        for n, p in (("chromium", chromium), ("chromedriver", shutil.which("chromedriver")))
+        if not p
+    ]
+    if not missing:
+        return
+    reason = f"{' and '.join(missing)} not found: install them with `{APT_LINE}`"
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(f"{reason} (CI=true: .ci/run installs them, so this is a failure)")
+    pytest.skip(reason)
+
+
 def test_viewer_draws_robot_and_timeline(short_run, tmp_path) -> None:
+    require_browser()
     from PIL import Image
 
     from qpretarget.commands.view import build_viewer
@@ -143,3 +166,13 @@ def test_live_viewer_from_a_plain_script(configs_dir, tmp_path) -> None:
     assert out.returncode == 0, out.stderr
     assert "sent 20 messages []" in out.stdout
     assert "leaked" not in out.stderr and "Traceback" not in out.stderr
+
+
+def test_missing_browser_skips_outside_ci_and_fails_in_ci(monkeypatch) -> None:
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="apt-get install chromium chromium-driver"):
+        require_browser()
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="chromium and chromedriver not found"):
+        require_browser()
