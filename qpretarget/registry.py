@@ -17,6 +17,14 @@ from .errors import ConfigError, UnknownNameError, close_matches_hint
 
 T = TypeVar("T")
 
+#: Class -> the name it is registered under (for messages about its YAML keys).
+_REGISTERED_NAMES: dict[type, str] = {}
+
+
+def _yaml_name(cls: type) -> str:
+    """The ``type:`` name of a registered class, else its class name."""
+    return _REGISTERED_NAMES.get(cls, cls.__name__)
+
 
 class Registry(dict[str, type]):
     """A named registry of classes."""
@@ -29,13 +37,25 @@ class Registry(dict[str, type]):
         """Class decorator registering ``cls`` under ``name``."""
 
         def deco(cls: type[T]) -> type[T]:
-            if name in self and self[name] is not cls:
-                raise ValueError(f"{self.kind} {name!r} is registered twice")
-            self[name] = cls
+            self.add(name, cls)
             cls.type_name = name  # type: ignore[attr-defined]
+            _REGISTERED_NAMES[cls] = name
             return cls
 
         return deco
+
+    def add(self, name: str, cls: type) -> None:
+        """Register ``cls`` under ``name`` without naming the class after it.
+
+        For one class serving several names (the qpsolvers adapter registers every solver
+        qpsolvers knows).
+
+        Raises:
+            ValueError: ``name`` is already registered to another class.
+        """
+        if name in self and self[name] is not cls:
+            raise ValueError(f"{self.kind} {name!r} is registered twice")
+        self[name] = cls
 
     def lookup(self, name: Any, *, path: str) -> type:
         """Return the class registered as ``name`` or raise with close matches."""
@@ -53,22 +73,28 @@ class Registry(dict[str, type]):
             ) from None
 
 
-def check_keywords(
-    cls: type, spec: Mapping[str, Any], *, path: str, extra: tuple[str, ...] = ()
-) -> None:
-    """Check that ``spec``'s keys are keyword arguments of ``cls`` and required ones are present."""
-    sig = inspect.signature(cls.__init__)
-    params = {
+def keyword_parameters(cls: type) -> dict[str, inspect.Parameter]:
+    """The YAML keys of ``cls``: its constructor's named parameters, in signature order."""
+    sig = inspect.signature(cls)
+    return {
         n: p
         for n, p in sig.parameters.items()
         if n != "self" and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
     }
+
+
+def check_keywords(
+    cls: type, spec: Mapping[str, Any], *, path: str, extra: tuple[str, ...] = ()
+) -> None:
+    """Check that ``spec``'s keys are keyword arguments of ``cls`` and required ones are present."""
+    sig = inspect.signature(cls)
+    params = keyword_parameters(cls)
     accepts_any = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
     allowed = set(params) | set(extra)
     for key in spec:
         if key not in allowed and not accepts_any:
             raise ConfigError(
-                f"unknown key {key!r} for {getattr(cls, 'type_name', cls.__name__)!r}."
+                f"unknown key {key!r} for {_yaml_name(cls)!r}."
                 f"{close_matches_hint(key, sorted(allowed))} Allowed keys: "
                 f"{', '.join(sorted(allowed))}.",
                 path=f"{path}.{key}",
@@ -76,7 +102,7 @@ def check_keywords(
     for n, p in params.items():
         if p.default is inspect.Parameter.empty and n not in spec:
             raise ConfigError(
-                f"missing required key {n!r} for {getattr(cls, 'type_name', cls.__name__)!r}.",
+                f"missing required key {n!r} for {_yaml_name(cls)!r}.",
                 path=path,
             )
 

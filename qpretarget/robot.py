@@ -101,7 +101,24 @@ class RobotModel:
                     pin.Frame(foot.frame, parent.parentJoint, parent_id, placement, pin.OP_FRAME)
                 )
 
-        # Limits: free-flyer coordinates are unbounded.
+        self._init_limits(position_limits, velocity_limits)
+
+        q_ref = self._reference_posture(reference, reference_joints)
+        self.data = model.createData()
+        if free_flyer and place_on_ground and self.feet:
+            q_ref = self._place_on_ground(q_ref)
+        q_ref.setflags(write=False)
+        self.q_reference = q_ref
+        self._geometry_cache: dict[str, Any] = {}
+
+    def _init_limits(
+        self,
+        position_limits: Mapping[str, Sequence[float]] | None,
+        velocity_limits: Mapping[str, float] | None,
+    ) -> None:
+        """Joint limits of the URDF with the YAML's overrides; the one-DoF joints' indices."""
+        # Free-flyer coordinates are unbounded.
+        model, free_flyer = self.model, self.free_flyer
         self.root_nq = 7 if free_flyer else 0
         self.root_nv = 6 if free_flyer else 0
         self.q_min = np.array(model.lowerPositionLimit, dtype=float)
@@ -146,7 +163,14 @@ class RobotModel:
         self.q_min[self.q_min < -huge] = -np.inf
         self.q_max[self.q_max > huge] = np.inf
 
-        # Reference posture.
+    def _reference_posture(
+        self, reference: str | None, reference_joints: Mapping[str, float] | None
+    ) -> np.ndarray:
+        """The reference posture (neutral, or the SRDF's ``reference``) with joint overrides.
+
+        Joints outside their limits are moved just inside (listed in ``reference_adjusted``).
+        """
+        model = self.model
         q_ref = pin.neutral(model)
         if self.srdf_path is not None:
             pin.loadReferenceConfigurations(model, str(self.srdf_path), False)
@@ -162,7 +186,7 @@ class RobotModel:
         for jname, value in (reference_joints or {}).items():
             j = self.joint_index(jname, path=f"robot.reference_joints.{jname}")
             q_ref[self.joint_q_index[j]] = float(value)
-        if free_flyer:
+        if self.free_flyer:
             q_ref[3:7] = q_ref[3:7] / np.linalg.norm(q_ref[3:7])
         # A reference outside the joint limits is unusable by a controller: move such joints just
         # inside (by 1% of their range, at most 0.01 rad) and keep the list for `info`.
@@ -173,12 +197,7 @@ class RobotModel:
         outside = (q_ref[qi] < lo) | (q_ref[qi] > hi)
         self.reference_adjusted = [self.joint_names[j] for j in np.where(outside)[0]]
         q_ref[qi] = np.where(outside, clipped, q_ref[qi])
-        self.data = model.createData()
-        if free_flyer and place_on_ground and self.feet:
-            q_ref = self._place_on_ground(q_ref)
-        q_ref.setflags(write=False)
-        self.q_reference = q_ref
-        self._geometry_cache: dict[str, Any] = {}
+        return q_ref
 
     # ------------------------------------------------------------------ construction
     @classmethod

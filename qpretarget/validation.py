@@ -24,7 +24,10 @@ def positive_float(value: Any, name: str, *, allow_zero: bool = False) -> float:
 
 def weight_vector(value: npt.ArrayLike, dim: int, name: str) -> np.ndarray:
     """Return a (dim,) non-negative weight vector from a scalar or a sequence."""
-    arr = np.asarray(value, dtype=float) if not isinstance(value, str) else None
+    is_bool = isinstance(value, (bool, np.bool_)) or (
+        isinstance(value, (list, tuple)) and any(isinstance(x, (bool, np.bool_)) for x in value)
+    )
+    arr = np.asarray(value, dtype=float) if not isinstance(value, str) and not is_bool else None
     if arr is None or arr.ndim > 1 or (arr.ndim == 1 and arr.shape[0] != dim):
         raise ConfigError(f"{name} must be a number or a list of {dim} numbers, got {value!r}.")
     if np.any(~np.isfinite(arr)) or np.any(arr < 0):

@@ -32,7 +32,7 @@ import pinocchio as pin
 import yaml
 
 from qpretarget.analysis.benchmark import machine_info
-from qpretarget.collision.geometry import CollisionModel
+from qpretarget.collision import CollisionModel
 from qpretarget.constraints import CONSTRAINTS
 from qpretarget.control.controller import Controller
 from qpretarget.robot import RobotState

@@ -133,7 +133,7 @@ def test_tau_is_inverse_dynamics(g1_acc: Controller) -> None:
         assert res.status == "ok", res.messages
         assert res.tau is not None and res.tau.shape == (ctrl.robot.nv,)
         alpha_c = (res.v - v) / dt  # acceleration applied during the tick
-        assert np.allclose(alpha_c, ctrl._level_impl.alpha_c, atol=1e-9)
+        assert np.allclose(alpha_c, ctrl.level_impl.alpha_c, atol=1e-9)
         H = pin.crba(model, data, q)
         H = np.triu(H) + np.triu(H, 1).T
         h = pin.nonLinearEffects(model, data, q, v)
@@ -268,7 +268,7 @@ def test_drift_terms_match_finite_differences() -> None:
         ],
     }
     ctrl = Controller(cfg)
-    lvl: AccelerationLevel = ctrl._level_impl
+    lvl: AccelerationLevel = ctrl.level_impl
     robot = ctrl.robot
     rng = np.random.default_rng(3)
     q = robot.q_reference.copy()
@@ -286,7 +286,7 @@ def test_drift_terms_match_finite_differences() -> None:
         # Forward difference with h = 1e-6: truncation ~h |d2J/dq2| |v|^3 ~ 1e-5 here.
         assert np.allclose(d, fd, atol=1e-4), t.name
     # The finite-difference fallback (tasks without an analytic drift) agrees with the CoM's.
-    lvl._drift_kind[1] = "fd"
+    lvl._drift_kind[1] = "finite_difference"
     lvl._fd_state = RobotState(robot)
     assert np.allclose(lvl.compute_drifts(ctrl.state)[1], drifts[1], atol=1e-5)
 
@@ -295,7 +295,7 @@ def test_drift_terms_match_finite_differences() -> None:
 def test_paper_defaults() -> None:
     cfg = hand_config(0.01, gv=30.0)
     del cfg["acceleration"], cfg["regularization"]
-    lvl: AccelerationLevel = Controller(cfg)._level_impl
+    lvl: AccelerationLevel = Controller(cfg).level_impl
     assert (lvl.gains.kp, lvl.gains.kv, lvl.gains.gv) == (300.0, pytest.approx(KV), 30.0)
     assert lvl.damping == PAPER_DAMPING == 0.1
 
@@ -409,8 +409,8 @@ def test_doc_yaml_runs() -> None:
     doc = (CONFIGS.parent / "docs" / "schemes" / "acceleration.md").read_text()
     snippet = doc.split("```yaml\n", 1)[1].split("```", 1)[0]
     ctrl = Controller(yaml.safe_load(snippet))
-    assert isinstance(ctrl._level_impl, AccelerationLevel)
-    assert ctrl._level_impl.gains.kv == pytest.approx(KV)
+    assert isinstance(ctrl.level_impl, AccelerationLevel)
+    assert ctrl.level_impl.gains.kv == pytest.approx(KV)
     p = ctrl.task("right_wrist").position_target + [0.01, 0.0, 0.0]
     for _ in range(3):
         res = ctrl.step({"right_wrist": p})

@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 import yaml
 
-from qpretarget.collision.geometry import (
+from qpretarget.collision import (
     CollisionModel,
     fit_capsule,
     link_shapes,

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -13,6 +12,7 @@ import pytest
 import yaml
 
 from qpretarget import Controller, load_robot
+from qpretarget.constraints.self_collision import SelfCollision
 from qpretarget.errors import ConfigError
 from qpretarget.robot import RobotState
 from qpretarget.weighting.base import REGULARIZATIONS
@@ -158,10 +158,8 @@ def test_joint_toward_limit_slows_and_stops_before_it_and_moves_freely_away(g1) 
     assert x[iv] < 0 and abs(x[iv] - ref[iv]) < 1e-6
 
 
-class StubCollisions:
+class StubCollisions(SelfCollision):
     """A stand-in for the self_collision module: fixed distances and distance gradients."""
-
-    type_name = "self_collision"
 
     def __init__(self, d, grad):
         self.d, self.grad = d, grad
@@ -176,7 +174,7 @@ def test_crac_collision_weights_follow_eq_18_to_27(g1) -> None:
     grad = rng.standard_normal((3, g1.nv))
     stub = StubCollisions(d, grad)
     reg = REGULARIZATIONS["crac"](inertia=True)
-    reg.bind(g1, SimpleNamespace(constraints=[stub]))
+    reg.bind(g1, [stub])
     st = RobotState(g1)
     v = rng.standard_normal(g1.nv)
     st.update(g1.q_reference.copy(), v)
@@ -200,7 +198,7 @@ def test_crac_collision_weights_follow_eq_18_to_27(g1) -> None:
 
 def test_crac_without_collision_module_uses_joint_limits_only(g1) -> None:
     reg = REGULARIZATIONS["crac"](inertia=False)
-    reg.bind(g1, SimpleNamespace(constraints=[]))
+    reg.bind(g1, [])
     st = RobotState(g1)
     W = reg.matrix(st, 0.01)
     assert reg.n_pairs == 0

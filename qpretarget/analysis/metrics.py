@@ -418,13 +418,13 @@ class LinkPairDistances:
         robot: the robot.
         pairs: link-name pairs; a key-point name (``left_hand``) is resolved to the link that
             carries its frame's geometry.
-        geometry: ``convex_hull`` or ``capsule`` (see :mod:`qpretarget.collision.geometry`).
+        geometry: ``convex_hull`` or ``capsule`` (see :mod:`qpretarget.collision`).
     """
 
     def __init__(
         self, robot: RobotModel, pairs: Sequence[tuple[str, str]], *, geometry: str = "convex_hull"
     ) -> None:
-        from ..collision.geometry import CollisionModel
+        from ..collision import CollisionModel
         from ..robot import RobotState
 
         resolved = [(self._link(robot, a), self._link(robot, b)) for a, b in pairs]
@@ -436,7 +436,7 @@ class LinkPairDistances:
     @staticmethod
     def _link(robot: RobotModel, name: str) -> str:
         """A key-point or frame name -> the link (body frame) holding its collision geometry."""
-        from ..collision.geometry import link_shapes
+        from ..collision import link_shapes
         from ..constraints.self_collision import resolve_link
         from ..errors import UnknownNameError
 

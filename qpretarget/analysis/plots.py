@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """Figures of a run's metrics (``qpretarget evaluate``), drawn with matplotlib's Agg canvas.
 
-matplotlib is an optional dependency (``pip install qpretarget[plot]``), imported when a figure is
+matplotlib is an optional dependency (the ``plot`` extra), imported when a figure is
 drawn. Figures are built on a :class:`matplotlib.figure.Figure` with the Agg canvas, never through
 ``pyplot``, so nothing here changes the user's matplotlib backend.
 
@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import QPRetargetError
+from ..errors import MissingDependencyError, install_hint
 from .metrics import MetricSeries
 
 #: Resolution of every figure [dots per inch].
@@ -44,7 +44,7 @@ FIGSIZE: dict[str, tuple[float, float]] = {
 }
 
 
-class PlotDependencyError(QPRetargetError, ImportError):
+class PlotDependencyError(MissingDependencyError):
     """matplotlib is not installed."""
 
 
@@ -54,8 +54,7 @@ def _figure(name: str) -> Any:
         from matplotlib.figure import Figure
     except ImportError:
         raise PlotDependencyError(
-            "drawing figures needs matplotlib: install it with `pip install qpretarget[plot]` "
-            "(or `pip install matplotlib`)."
+            install_hint("plot", "drawing figures (matplotlib)"), extra="plot"
         ) from None
     fig = Figure(figsize=FIGSIZE[name], dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)

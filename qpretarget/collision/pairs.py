@@ -32,9 +32,17 @@ import numpy as np
 
 from ..errors import ConfigError, UnknownNameError
 from ..robot import RobotModel, RobotState
-from .geometry import CollisionModel, LinkShape
+from .model import CollisionModel
+from .shapes import LinkShape
 
 Pair = tuple[str, str]
+
+
+def adjacent_links(robot: RobotModel, a: str, b: str, shapes: Mapping[str, LinkShape]) -> bool:
+    """``True`` when links ``a`` and ``b`` are on the same joint or on a parent/child joint pair."""
+    ja, jb = shapes[a].joint, shapes[b].joint
+    parents = robot.model.parents
+    return ja == jb or parents[ja] == jb or parents[jb] == ja
 
 
 @dataclass(frozen=True)

@@ -75,11 +75,13 @@ def run(args: argparse.Namespace) -> int:
     """Retarget, save, print the summary; return the exit code."""
     from ..control.controller import Controller
     from ..errors import ConfigError
+    from ..fileio import atomic_path, check_output_file
     from ..retarget.retargeter import Retargeter
     from ..retarget.summary import format_summary, summarize_run
 
     if args.rate is not None and not args.rate > 1:
         raise ConfigError(f"--rate must be above 1 Hz, got {args.rate}.")
+    output = check_output_file(args.output, ".npz")
     controller = Controller.from_yaml(args.config)
     retargeter = Retargeter(controller, keypoint_map=args.keypoint_map, rate=args.rate)
     motion = _load(args)
@@ -92,7 +94,9 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet and sys.stderr.isatty(),
     )
     wall = time.perf_counter() - t0
-    out = traj.save(args.output)
+    with atomic_path(output, suffix=".npz") as tmp:
+        traj.save(tmp)
+    out = output
     summary = summarize_run(traj, controller, wall_time=wall)
     title = (
         f"{Path(args.motion).name} -> {controller.robot.name} "

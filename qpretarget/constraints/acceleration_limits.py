@@ -34,8 +34,8 @@ acceleration bound that gives (reported in ``StepResult.relaxed``).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -43,6 +43,7 @@ from ..errors import ConfigError
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
 from .base import CONSTRAINTS, Constraint
+from .joint_limits import JointLimits
 
 
 @CONSTRAINTS.register("acceleration_limits")
@@ -62,6 +63,8 @@ class AccelerationLimits(Constraint):
     """
 
     importance = 80
+
+    has_bounds: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -107,12 +110,12 @@ class AccelerationLimits(Constraint):
         self._lb = np.full(robot.nv, -np.inf)
         self._ub = np.full(robot.nv, np.inf)
 
-    def link(self, controller: Any) -> None:
+    def link(self, constraints: Sequence[Constraint]) -> None:
         """Read the gain and margin of the controller's ``joint_limits`` (called once built)."""
-        for c in controller.constraints:
-            if c.type_name == "joint_limits":
+        for c in constraints:
+            if isinstance(c, JointLimits):
                 self._set_gamma(float(c.gain))
-                margin = float(getattr(c, "margin", 0.0))
+                margin = float(c.margin)
                 qi = self._qi
                 self._qmin = self.robot.q_min[qi] + margin  # type: ignore[union-attr]
                 self._qmax = self.robot.q_max[qi] - margin  # type: ignore[union-attr]

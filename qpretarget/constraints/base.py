@@ -11,6 +11,7 @@ tick (lowest first; contacts and limits give last).
 from __future__ import annotations
 
 import abc
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -53,6 +54,8 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
     type_name: ClassVar[str] = "constraint"
     #: Relaxation order: when the hard constraints conflict, lower importance gives first.
     importance: ClassVar[int] = 50
+    #: The module overrides :meth:`compute_bounds` (the relaxation fallback slacks its box).
+    has_bounds: ClassVar[bool] = False
 
     def __init__(self, name: str | None = None) -> None:
         if name is not None and (not isinstance(name, str) or not name):
@@ -60,10 +63,25 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
         self.name = name or self.type_name
         self.n_rows = 0
         self.robot: RobotModel | None = None
+        #: Where the constraint sits in the YAML (``constraints[i]``), for error messages.
+        self.yaml_path = ""
 
     def bind(self, robot: RobotModel, *, path: str = "") -> None:
         """Resolve names and fix :attr:`n_rows`; raise here on bad names."""
         self.robot = robot
+
+    def link(self, constraints: Sequence[Constraint]) -> None:
+        """Find the other constraints this one works with (e.g. the contacts).
+
+        Called once by the controller after every constraint is bound, with all of them (this
+        one included). Default: nothing to find.
+        """
+
+    def on_contacts_changed(self, contacts: Constraint, state: RobotState) -> None:
+        """The supporting feet of ``contacts`` (a ``contacts`` constraint) changed.
+
+        Called by ``Controller.set_contacts`` on every other constraint. Default: nothing to do.
+        """
 
     def reset(self, state: RobotState) -> None:
         """Forget history (anchors, previous velocities) at ``Controller.reset``."""

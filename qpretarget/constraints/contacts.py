@@ -320,7 +320,7 @@ class Contacts(Constraint):
                     f"contact {self.names[i]!r} has no sole rectangle; give "
                     "`frames: {name: {frame: F, rectangle: [x_min, x_max, y_min, y_max]}}` to use "
                     "a support polygon.",
-                    path=getattr(self, "yaml_path", ""),
+                    path=self.yaml_path,
                 )
             x0, x1, y0, y1 = rect
             local = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])

@@ -26,10 +26,11 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..collision.geometry import CollisionModel, LinkShape, link_shapes, obstacle_shape
+from ..collision import CollisionModel, LinkShape, link_shapes, obstacle_shape
 from ..errors import ConfigError
 from ..robot import RobotModel, RobotState
-from .base import CONSTRAINTS
+from .base import CONSTRAINTS, Constraint
+from .contacts import Contacts
 from .self_collision import DistanceDamper, resolve_link
 
 #: Name of the ground body in pair names and reports.
@@ -67,6 +68,7 @@ class Ground(DistanceDamper):
     """
 
     importance = 75
+    disarms_rows = True
 
     def __init__(
         self,
@@ -133,7 +135,7 @@ class Ground(DistanceDamper):
         )
         self.links: list[str] = []
         self.obstacles: list[LinkShape] = []
-        self._contacts: Any = None
+        self._contacts: Contacts | None = None
         self._contacts_version = -1
 
     # ------------------------------------------------------------------ binding
@@ -191,24 +193,25 @@ class Ground(DistanceDamper):
         self.armed = np.ones(len(pairs), dtype=bool)
         self._setup_rows(robot)
 
-    def link(self, controller: Any) -> None:
+    def link(self, constraints: Sequence[Constraint]) -> None:
         """Find the contacts constraint (called once the controller is built)."""
-        for c in getattr(controller, "constraints", []):
-            if hasattr(c, "set_contacts") and hasattr(c, "frame_ids"):
+        for c in constraints:
+            if isinstance(c, Contacts):
                 self._contacts = c
                 return
 
-    def on_contacts_changed(self, contacts: Any, state: RobotState) -> None:
+    def on_contacts_changed(self, contacts: Constraint, state: RobotState) -> None:
         """The supporting feet changed: disarm the ground rows of the feet now in contact."""
-        self._contacts = contacts
+        if isinstance(contacts, Contacts):
+            self._contacts = contacts
         self._disarm_contacts()
 
     def _disarm_contacts(self) -> None:
         c = self._contacts
         if c is None or self.robot is None:
             return
-        self._contacts_version = getattr(c, "version", -1)
-        active = set(getattr(c, "active_feet", []))
+        self._contacts_version = c.version
+        active = set(c.active_feet)
         joints = {
             self.robot.model.frames[fid].parentJoint
             for n, fid in zip(c.names, c.frame_ids, strict=False)
@@ -232,7 +235,7 @@ class Ground(DistanceDamper):
         model = self.model
         assert model is not None
         c = self._contacts
-        if c is not None and getattr(c, "version", -1) != self._contacts_version:
+        if c is not None and c.version != self._contacts_version:
             self._disarm_contacts()
         ground = active < self.n_ground
         if ground.any():

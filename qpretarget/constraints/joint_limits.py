@@ -10,6 +10,8 @@ back in.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from ..robot import RobotModel, RobotState
@@ -28,6 +30,8 @@ class JointLimits(Constraint):
     """
 
     importance = 90
+
+    has_bounds: ClassVar[bool] = True
 
     def __init__(self, *, gain: float = 0.9, margin: float = 0.0, name: str | None = None) -> None:
         super().__init__(name)
@@ -69,6 +73,8 @@ class VelocityLimits(Constraint):
     """
 
     importance = 95
+
+    has_bounds: ClassVar[bool] = True
 
     def __init__(self, *, scale: float = 1.0, name: str | None = None) -> None:
         super().__init__(name)

@@ -28,12 +28,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pinocchio as pin
 
-from ..collision.geometry import GEOMETRIES, CollisionModel, LinkShape, adjacent_links, link_shapes
+from ..collision import GEOMETRIES, CollisionModel, LinkShape, adjacent_links, link_shapes
 from ..errors import ConfigError, UnknownNameError
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
@@ -108,6 +108,10 @@ class DistanceDamper(Constraint):
     Subclasses build :attr:`model` (and :attr:`pairs`, :attr:`safety`, one safety distance per
     pair) in :meth:`bind`, then call :meth:`_setup_rows`.
     """
+
+    #: The subclass overrides :meth:`_row_mask` to disarm some pairs (rows are then selected).
+    disarms_rows: ClassVar[bool] = False
+    has_bounds: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -184,7 +188,7 @@ class DistanceDamper(Constraint):
         uniform = bool(np.all(self.safety == self.safety[0])) if P else True
         self._safety_scalar = float(self.safety[0]) if P and uniform else None
         # Direct rows (row i = pair i) unless rows are capped or a subclass disarms some.
-        self._direct = self.max_rows is None and type(self)._row_mask is DistanceDamper._row_mask
+        self._direct = self.max_rows is None and not self.disarms_rows
         # Trust-region step bound per pair and coordinate at scale 1: sqrt(2 eps / r) [rad].
         assert self.model is not None
         eps = self.trust_region if self.trust_region is not None else np.inf
@@ -454,6 +458,8 @@ class SelfCollision(DistanceDamper):
             raise ConfigError(f"exclude must be a list of [link_a, link_b], got {exclude!r}.")
         self.touch_distance = float(touch_distance)
         self.use_srdf = bool(use_srdf)
+        #: Pair distances in the reference posture [m] (set by bind; reported by describe()).
+        self.reference_distances: np.ndarray | None = None
         #: Why candidate pairs were left out: reason -> list of pairs.
         self.left_out: dict[str, list[tuple[str, str]]] = {}
         #: Warnings about kept pairs (explicit lists: adjacent or touching at the reference).
@@ -603,7 +609,7 @@ class SelfCollision(DistanceDamper):
                 + ", ".join(f"{v} {k}" for k, v in sorted(kinds.items()))
                 + ")"
             )
-        ref = getattr(self, "reference_distances", None)
+        ref = self.reference_distances
         for k, (a, b) in enumerate(self.pairs):
             dist = f"  {ref[k] * 1000:7.1f} mm at reference" if ref is not None else ""
             lines.append(f"  keep {a} / {b}{dist}")

@@ -31,7 +31,7 @@ motions do not carry the CoM over an edge between two linearizations.
 from __future__ import annotations
 
 import warnings
-from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -41,7 +41,7 @@ from ..geometry2d import convex_hull_2d  # noqa: F401 (re-exported)
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
-from .contacts import velocity_kinematics
+from .contacts import Contacts, velocity_kinematics
 
 
 def polygon_halfplanes(vertices: np.ndarray, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -127,7 +127,7 @@ class SupportPolygon(Constraint):
         ):
             raise ConfigError(f"max_edges must be an integer >= 3, got {max_edges!r}.")
         self._max_edges = max_edges
-        self.contacts: Any = None
+        self.contacts: Contacts | None = None
         self._seen_version = -1
         self.normals = np.zeros((0, 2))
         self.offsets = np.zeros(0)
@@ -144,14 +144,14 @@ class SupportPolygon(Constraint):
         self._o = np.zeros(self.n_rows)
         self._n_edges = 0
 
-    def link(self, controller: Any) -> None:
+    def link(self, constraints: Sequence[Constraint]) -> None:
         """Find the controller's ``contacts`` constraint (called once the controller is built).
 
         Raises:
             ConfigError: the contacts can make more hull edges than this block has rows.
         """
-        for c in controller.constraints:
-            if hasattr(c, "sole_corners_in_world") and hasattr(c, "set_contacts"):
+        for c in constraints:
+            if isinstance(c, Contacts):
                 self.contacts = c
                 break
         if self.contacts is not None and 4 * len(self.contacts.names) > self.n_rows:
@@ -159,7 +159,7 @@ class SupportPolygon(Constraint):
                 f"{len(self.contacts.names)} contacts can make a hull of "
                 f"{4 * len(self.contacts.names)} edges but max_edges is {self.n_rows}; raise "
                 "max_edges.",
-                path=getattr(self, "yaml_path", ""),
+                path=self.yaml_path,
             )
 
     # ------------------------------------------------------------------ hull
@@ -198,7 +198,7 @@ class SupportPolygon(Constraint):
             raise ConfigError(
                 f"the support polygon has {len(normals)} edges but max_edges is {self.n_rows}; "
                 "raise max_edges.",
-                path=getattr(self, "yaml_path", ""),
+                path=self.yaml_path,
             )
         margin = self.margin
         if margin > 0:
@@ -227,9 +227,9 @@ class SupportPolygon(Constraint):
         if self.contacts is None:
             self.update_polygon(state)
 
-    def on_contacts_changed(self, contacts: Any, state: RobotState) -> None:
+    def on_contacts_changed(self, contacts: Constraint, state: RobotState) -> None:
         """Hook of ``Controller.set_contacts``: rebuild the polygon from the new contact set."""
-        if self.contacts is None:
+        if self.contacts is None and isinstance(contacts, Contacts):
             self.contacts = contacts
         self.update_polygon(state)
 

@@ -1,9 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
 r"""Constrained resolved acceleration control, CRAC (Bin Hammam et al. 2015, eq. 9-11, 30-42).
 
-``level: acceleration`` in a controller's YAML hands :meth:`Controller.step` to
-:class:`AccelerationLevel`. It reuses the controller's task and constraint modules, its
-regularization metric :math:`W` and its strategy (augmentation, hierarchy, ...): one tick is
+``level: acceleration`` in a controller's YAML makes :class:`AccelerationLevel` the
+:class:`~qpretarget.control.levels.Level` that :meth:`Controller.step` solves each tick with.
+It reuses the controller's task and constraint modules, its regularization metric :math:`W`
+and its strategy (augmentation, hierarchy, ...): one tick is
 
 1. **Velocity-level reference** :math:`\dot q_c` (CRAC eq. 16 / 41): the controller's own
    velocity-level problem for the same targets, solved by a second instance of its strategy, with
@@ -48,25 +49,25 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from ..errors import ConfigError, TargetError
+from ..errors import ConfigError
 from ..registry import build_from_spec
-from ..robot import RobotState
-from ..solvers import make_solver
-from ..strategies import STRATEGIES, Strategy, StrategyResult, TickProblem
+from ..robot import RobotModel, RobotState
+from ..strategies import Strategy, StrategyResult, TickProblem
 from ..tasks import CostBlock, Task
-from ..tasks.com import ComTask
-from ..tasks.posture import DampingTask, PostureTask
 from ..validation import positive_float
+from .levels import Level, LevelOutcome
+from .relaxation import Fallback
+from .velocity import solve_with_fallback
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .controller import Controller, StepResult
+#: ``Task.drift_kind`` of a task whose drift is a finite difference of its Jacobian.
+FD = "finite_difference"
 
 #: Damping :math:`\lambda` of CRAC section 5, used when the YAML's ``regularization`` gives none.
 PAPER_DAMPING = 0.1
@@ -102,42 +103,28 @@ class AccelerationGains:
             object.__setattr__(self, "velocity_gain", vg)
 
 
-def _rebuild_strategy(controller: Controller) -> Strategy:
-    """A second, independent instance of the controller's strategy (own solvers, own warm start)."""
-    spec = controller.config.get("strategy")
-    if spec is None:
-        spec = {}
-    if isinstance(spec, str):
-        spec = {"type": spec}
-    kwargs = dict(spec)
-    type_name = kwargs.pop("type", "augmentation")
-    strategy = build_from_spec(
-        STRATEGIES.lookup(type_name, path="strategy.type"), kwargs, path="strategy"
-    )
-    tasks = controller.tasks.values()
-    strategy.bind(
-        controller.robot,
-        [(t.name, t.dim, t.level) for t in tasks],
-        controller.n_rows,
-        lambda: make_solver(controller.solver_spec, path="solver"),
-    )
-    return strategy
+class AccelerationLevel(Level):
+    r"""CRAC at acceleration level: the :class:`~qpretarget.control.levels.Level` of that name.
 
-
-class AccelerationLevel:
-    r"""CRAC at acceleration level for a :class:`~qpretarget.control.controller.Controller`.
-
-    Built by the controller when its YAML says ``level: acceleration``; ``Controller.step``
-    returns :meth:`step`. The controller's :attr:`strategy` solves the acceleration QP, a second
-    instance of the same strategy solves the velocity-level reference :math:`\dot q_c`.
+    The controller's strategy solves the acceleration QP, a second instance of the same strategy
+    (``make_strategy()``) solves the velocity-level reference :math:`\dot q_c`.
 
     Args:
-        controller: the controller whose tasks, constraints, regularization and strategy are used.
+        robot: the controller's robot.
+        tasks: the controller's tasks, in YAML order.
+        n_rows: number of constraint rows of the controller's QP.
+        strategy: the controller's strategy (solves the acceleration QP).
+        make_strategy: builds a second, independent instance of the strategy (own solvers, own
+            warm start) for :math:`\dot q_c`.
+        fallback: the relaxation fallback of the velocity-level reference, or ``None``.
+        damping: :math:`\lambda` of both QPs (the YAML's ``regularization.damping``, else
+            :data:`PAPER_DAMPING`).
+        timings: the controller's per-stage seconds.
         spec: the YAML ``acceleration:`` mapping (keys of :class:`AccelerationGains`) or ``None``.
 
     Attributes:
         gains: the :class:`AccelerationGains` in force.
-        damping: :math:`\lambda` of both QPs (YAML ``regularization.damping``, else 0.1).
+        damping: :math:`\lambda` of both QPs.
         alpha: resolved acceleration :math:`\alpha` of the last tick (nv,).
         alpha_c: constrained resolved acceleration :math:`\alpha_c` of the last tick (nv,).
         qdot_c: velocity-level reference :math:`\dot q_c` of the last tick (nv,).
@@ -146,7 +133,21 @@ class AccelerationLevel:
         ConfigError: on an invalid ``acceleration:`` section.
     """
 
-    def __init__(self, controller: Controller, spec: Mapping[str, Any] | None = None) -> None:
+    name = "acceleration"
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        tasks: list[Task],
+        n_rows: int,
+        strategy: Strategy,
+        make_strategy: Callable[[], Strategy],
+        fallback: Fallback | None,
+        damping: float,
+        timings: dict[str, float],
+        spec: Mapping[str, Any] | None = None,
+    ) -> None:
+        super().__init__(timings)
         if spec is None:
             spec = {}
         if not isinstance(spec, Mapping):
@@ -157,34 +158,22 @@ class AccelerationLevel:
         self.gains: AccelerationGains = build_from_spec(
             AccelerationGains, dict(spec), path="acceleration"
         )
-        self.ctrl = controller
-        robot = controller.robot
         self.robot = robot
         self.model = robot.model
-        reg_spec = controller.config.get("regularization")
-        has_damping = isinstance(reg_spec, Mapping) and "damping" in reg_spec
-        self.damping = controller.regularization.damping if has_damping else PAPER_DAMPING
-        self.velocity_strategy = _rebuild_strategy(controller)
+        self.strategy, self.fallback, self.damping = strategy, fallback, damping
+        self.velocity_strategy = make_strategy()
         self._dyn_data = self.model.createData()  # RNEA works on its own data
-        self._tasks: list[Task] = list(controller.tasks.values())
+        self._tasks: list[Task] = list(tasks)
         nv = robot.nv
-        # Drift terms: exact for frame tasks (classical acceleration) and the CoM (pinocchio),
-        # zero for constant Jacobians, finite differences for any other task.
-        self._drift_kind: list[str] = []
-        for t in self._tasks:
-            if isinstance(t, (PostureTask, DampingTask)) or getattr(t, "constant_jacobian", False):
-                self._drift_kind.append("zero")
-            elif isinstance(t, ComTask):
-                self._drift_kind.append("com")
-            elif type(t).compute_jdot_v is not Task.compute_jdot_v:
-                self._drift_kind.append("task")
-            else:
-                self._drift_kind.append("fd")
-        self._fd_state = RobotState(robot) if "fd" in self._drift_kind else None
+        # Drift terms (each task's ``drift_kind``): exact for frame tasks (classical
+        # acceleration) and the CoM (pinocchio), zero for constant Jacobians, finite differences
+        # for any other task.
+        self._drift_kind: list[str] = [t.drift_kind for t in self._tasks]
+        self._n_rows = n_rows
+        self._fd_state = RobotState(robot) if FD in self._drift_kind else None
         self._zero_v = np.zeros(nv)
         self._lb, self._ub = np.empty(nv), np.empty(nv)  # bounds on alpha
         self._lbv, self._ubv = np.empty(nv), np.empty(nv)  # velocity-level box containing qdot_c
-        n_rows = controller.n_rows
         self._l = np.empty(n_rows)
         self._u = np.empty(n_rows)
         self._prev_vd: dict[str, np.ndarray] = {}
@@ -222,7 +211,7 @@ class AccelerationLevel:
             h = 1e-7
             self._fd_state.update(pin.integrate(model, q, v * h), v)
             for i, (t, kind) in enumerate(zip(self._tasks, self._drift_kind, strict=True)):
-                if kind == "fd":
+                if kind == FD:
                     # Copy first: a task may return one internal buffer; evaluate at ``state``
                     # last so such a buffer ends up holding this tick's Jacobian.
                     J_h = t.compute_jacobian(self._fd_state).copy()
@@ -230,14 +219,14 @@ class AccelerationLevel:
         for i, (t, kind) in enumerate(zip(self._tasks, self._drift_kind, strict=True)):
             if kind == "zero":
                 out.append(np.zeros(t.dim))
-            elif kind == "task":
+            elif kind == "analytic":
                 out.append(np.asarray(t.compute_jdot_v(state), dtype=float))
             elif kind == "com":
                 if com_acc is None:
                     pin.centerOfMass(model, data, pin.KinematicLevel.ACCELERATION, False)
                     com_acc = data.acom[0].copy()
                 out.append(com_acc[t.rows])  # type: ignore[attr-defined]
-            else:  # kind == "fd"
+            else:  # kind == FD
                 out.append(fd_J[i])
         return out
 
@@ -250,6 +239,8 @@ class AccelerationLevel:
         velocity level's, so strategies can weight them in one product.
         """
         g, v, dt = self.gains, tp.state.v, tp.dt
+        kv = g.kv
+        assert kv is not None  # AccelerationGains fills it in
         a_all = self.a_all
         blocks = []
         i = 0
@@ -260,16 +251,16 @@ class AccelerationLevel:
             if t.feedforward:
                 vd = b.v_star - t.effective_gain(dt) * b.error
                 prev = self._prev_vd.get(t.name)
-                seg += g.kv * vd
+                seg += kv * vd
                 if prev is not None:
                     seg += (vd - prev) / dt  # a_d
                 self._prev_vd[t.name] = vd
             if tp.J_all is None:
-                seg -= g.kv * (b.J @ v)
+                seg -= kv * (b.J @ v)
             blocks.append(CostBlock(b.task, b.J, seg, b.weight, b.level, b.error))
             i += t.dim
         if tp.J_all is not None:
-            a_all -= g.kv * (tp.J_all @ v)  # - K_v J v for every task in one product
+            a_all -= kv * (tp.J_all @ v)  # - K_v J v for every task in one product
         return blocks
 
     def _velocity_blocks(self, tp: TickProblem) -> list[CostBlock]:
@@ -287,181 +278,149 @@ class AccelerationLevel:
             i += t.dim
         return out
 
-    def _solve_velocity(
-        self, tp: TickProblem
-    ) -> tuple[np.ndarray | None, StrategyResult, dict[str, float] | None]:
-        """Velocity-level solve, then the controller's fallback; ``None`` if both fail.
-
-        Returns:
-            ``(qdot_c, result, relaxed)`` with ``relaxed`` ``None`` unless the fallback was used.
-        """
-        res = self.velocity_strategy.solve(tp)
-        x = res.x if res.success and res.x is not None and np.all(np.isfinite(res.x)) else None
-        relaxed: dict[str, float] | None = None
-        if x is None and self.ctrl.fallback is not None:
-            fb = self.ctrl.fallback.solve(tp, res)
-            if fb is not None and fb.x is not None and np.all(np.isfinite(fb.x)):
-                x = fb.x
-                relaxed = dict(fb.relaxed)
-        return x, res, relaxed
-
-    # ------------------------------------------------------------------ loop
-    def step(
-        self, targets: Mapping[str, Any] | None = None, *, dt: float | None = None
-    ) -> StepResult:
-        """One CRAC tick (see the module docstring); returns a ``StepResult`` with ``tau``.
-
-        Raises:
-            TargetError: on an unknown task name, a malformed target or an invalid ``dt``.
-        """
-        from .controller import StepResult, TaskErrors
-
-        ctrl = self.ctrl
-        t0 = time.perf_counter()
-        if dt is None:
-            dt = ctrl.dt
-        elif isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0 < dt < 1:
-            raise TargetError(
-                f"dt must be a number of seconds in (0, 1), got {dt!r}.", tick=ctrl.tick + 1
-            )
-        dt = float(dt)
-        ctrl.tick += 1
-        messages: list[str] = []
-        ctrl.set_targets(targets, messages)
-        state = ctrl.state
-        q, v = state.q, state.v
-        tb = time.perf_counter()
-        tp = ctrl.build_tick(dt)
+    # ------------------------------------------------------------------ the tick
+    def solve(self, tp: TickProblem) -> LevelOutcome:
+        """One CRAC tick (see the module docstring); the outcome carries ``tau``."""
+        state, dt, timings = tp.state, tp.dt, self.timings
         tp.damping = self.damping
-        relaxed = dict(getattr(ctrl, "_bound_gave", {}))
         td = time.perf_counter()
         drifts = self.compute_drifts(state)
-        timings = ctrl.last_timings  # per-stage seconds, read by ``qpretarget bench``
         timings["drift"] = time.perf_counter() - td
-        build_time = time.perf_counter() - tb
+        build_time = timings["drift"]
 
         # 1. Velocity-level reference qdot_c (CRAC eq. 16 / 41). Conflicting hard constraints are
-        #    relaxed here, once per tick, by the controller's fallback (when installed).
+        #    relaxed here, once per tick, by the relaxation fallback (when installed).
         blocks_v = self._velocity_blocks(tp)
         tp_v = TickProblem(
             state, dt, blocks_v, tp.C, tp.l, tp.u, tp.lb, tp.ub, tp.W, tp.damping, tp.tick,
-            tp.J_all, tp.v_all if blocks_v is tp.blocks else self._vg_all,
+            tp.J_all, tp.v_all if blocks_v is tp.blocks else self._vg_all, tp.bound_gave,
         )  # fmt: skip
         tv = time.perf_counter()
-        qdot_c, res_v, rel_v = self._solve_velocity(tp_v)
+        qdot_c, res_v, rel_v = solve_with_fallback(self.velocity_strategy, self.fallback, tp_v)
         timings["velocity_qp"] = time.perf_counter() - tv
-        relaxed.update(rel_v or {})
+        out = LevelOutcome(
+            state.v, state.q, "ok", res_v.status, res_v.solve_time, res_v.iterations,
+            dict(tp.bound_gave),
+        )  # fmt: skip
+        out.relaxed.update(rel_v or {})
         if rel_v is not None:
-            messages.append(
-                f"tick {ctrl.tick}: hard constraints conflicted ({res_v.status}); relaxed {rel_v}."
+            out.messages.append(
+                f"tick {tp.tick}: hard constraints conflicted ({res_v.status}); relaxed {rel_v}."
             )
-        status = "relaxed" if relaxed else "ok"
-        res_a: StrategyResult | None = None
-        inv_dt = 1.0 / dt
+        if out.relaxed:
+            out.status = "relaxed"
         if qdot_c is None:
-            # No velocity-level solution: the acceleration QP has the same feasible set (the map
-            # alpha -> v+ is a bijection), so hold as the velocity level does: v+ = 0, q+ = q.
-            qdot_c = v.copy()
-            alpha = np.zeros_like(v)
-            v_next = np.zeros_like(v)
-            status = "held"
-            messages.append(
-                f"tick {ctrl.tick}: no usable velocity-level solution (solver status "
-                f"{res_v.status}); holding the configuration (alpha_c = -qdot/dt, v = 0)."
-            )
+            out.v_next = self._hold(tp, res_v, out)
         else:
-            tb = time.perf_counter()
-            s = self.gains.gv * (qdot_c - v)  # (nv,) CRAC eq. 31 shift
-            # 2. Resolved acceleration QP (CRAC eq. 9-14) with the hard constraints transcribed to
-            #    v+ = v + (alpha + s) dt. The map alpha -> v+ is a bijection, so this QP is feasible
-            #    exactly when the velocity-level one is. When the fallback had to relax the velocity
-            #    level, its set is widened to contain qdot_c: the QP keeps exactly that relaxation
-            #    and stays feasible (alpha = (qdot_c - v)/dt - s is a solution).
-            widen = rel_v is not None
-            lbv = np.minimum(tp.lb, qdot_c, out=self._lbv) if widen else tp.lb
-            ubv = np.maximum(tp.ub, qdot_c, out=self._ubv) if widen else tp.ub
-            np.subtract(lbv, v, out=self._lb)
-            self._lb *= inv_dt
-            self._lb -= s
-            np.subtract(ubv, v, out=self._ub)
-            self._ub *= inv_dt
-            self._ub -= s
-            if ctrl.n_rows:
-                Cq = tp.C @ qdot_c if widen else tp.l
-                Cv_s = tp.C @ (v * inv_dt + s)
-                np.minimum(tp.l, Cq, out=self._l)
-                self._l *= inv_dt
-                self._l -= Cv_s
-                np.maximum(tp.u, Cq if widen else tp.u, out=self._u)
-                self._u *= inv_dt
-                self._u -= Cv_s
-            blocks_a = self.acceleration_blocks(tp, drifts)
-            tp_a = TickProblem(
-                state, dt, blocks_a, tp.C, self._l, self._u, self._lb, self._ub, tp.W,
-                tp.damping, tp.tick, tp.J_all, self.a_all,
-            )  # fmt: skip
-            build_time += time.perf_counter() - tb
-            tq = time.perf_counter()
-            res_a = ctrl.strategy.solve(tp_a)
-            timings["acceleration_qp"] = time.perf_counter() - tq
-            ok = res_a.success and res_a.x is not None and np.all(np.isfinite(res_a.x))
-            if ok:
-                alpha = res_a.x
-            else:
-                alpha = (qdot_c - v) * inv_dt - s
-                messages.append(
-                    f"tick {ctrl.tick}: the acceleration QP failed (solver status "
-                    f"{res_a.status}); applying the velocity-level solution qdot_c this tick."
-                )
-            v_next = v + (alpha + s) * dt  # CRAC eq. 31, integrated
-            # Solvers meet bounds to their tolerance; the box is cheap to meet exactly.
-            np.clip(v_next, lbv, ubv, out=v_next)
-        # alpha_c of the motion actually applied (alpha + s up to the clip above).
-        alpha_c = (v_next - v) * inv_dt
+            out.v_next = self._accelerate(tp, drifts, qdot_c, rel_v is not None, out)
+        out.build_time += build_time
+        self._finish(tp, out)
+        return out
 
-        # 3. Torques (CRAC eq. 30) and semi-implicit integration.
-        tr = time.perf_counter()
-        tau = pin.rnea(self.model, self._dyn_data, q, v, alpha_c).copy()
-        timings["dynamics"] = time.perf_counter() - tr
-        q_next = pin.integrate(self.model, q, v_next * dt)
-        errors = TaskErrors(tp.blocks, ctrl.tasks)
-        for con in ctrl.constraints:
-            con.after_step(state, v_next, dt)
-        self.alpha, self.alpha_c, self.qdot_c = alpha, alpha_c, qdot_c
-        ctrl.v = v_next
-        tk = time.perf_counter()
-        state.update(q_next, v_next)
-        timings["kinematics"] = time.perf_counter() - tk
-        ctrl.t += dt
-        q_out = q_next.copy()
-        q_out.setflags(write=False)
-        v_out = v_next.copy()
-        v_out.setflags(write=False)
-        tau.setflags(write=False)
-        result = StepResult(
-            q=q_out,
-            v=v_out,
-            tick=ctrl.tick,
-            t=ctrl.t,
-            status=status,
-            solver_status=(res_v if res_a is None else res_a).status,
-            task_errors=errors,
-            solve_time=res_v.solve_time + (0.0 if res_a is None else res_a.solve_time),
-            build_time=build_time,
-            step_time=time.perf_counter() - t0,
-            iterations=res_v.iterations + (0 if res_a is None else res_a.iterations),
-            relaxed=relaxed,
-            messages=messages,
-            tau=tau,
+    def _hold(self, tp: TickProblem, res_v: StrategyResult, out: LevelOutcome) -> np.ndarray:
+        """No velocity-level solution: hold as the velocity level does (``v+ = 0``, ``q+ = q``).
+
+        The acceleration QP has the same feasible set (the map alpha -> v+ is a bijection).
+        """
+        v = tp.state.v
+        self.qdot_c = v.copy()
+        self.alpha = np.zeros_like(v)
+        out.status = "held"
+        out.messages.append(
+            f"tick {tp.tick}: no usable velocity-level solution (solver status "
+            f"{res_v.status}); holding the configuration (alpha_c = -qdot/dt, v = 0)."
         )
-        # Controller.step returns this result directly: notify its observers here.
-        if ctrl._observers:
-            ctrl._notify(result)
-        return result
+        return np.zeros_like(v)
+
+    def _transcribe_constraints(
+        self, tp: TickProblem, qdot_c: np.ndarray, s: np.ndarray, widen: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        r"""Bounds and rows on :math:`\alpha` from the velocity-level ones (CRAC eq. 34-42).
+
+        For :math:`v^+ = \dot q + (\alpha + s)\,dt`, written into this level's buffers.
+
+        The map alpha -> v+ is a bijection, so this QP is feasible exactly when the
+        velocity-level one is. When the fallback had to relax the velocity level (``widen``),
+        its set is widened to contain qdot_c: the QP keeps exactly that relaxation and stays
+        feasible (alpha = (qdot_c - v)/dt - s is a solution).
+
+        Returns:
+            The velocity-level box ``(lbv, ubv)`` in force (widened or not).
+        """
+        v, inv_dt = tp.state.v, 1.0 / tp.dt
+        lbv = np.minimum(tp.lb, qdot_c, out=self._lbv) if widen else tp.lb
+        ubv = np.maximum(tp.ub, qdot_c, out=self._ubv) if widen else tp.ub
+        np.subtract(lbv, v, out=self._lb)
+        self._lb *= inv_dt
+        self._lb -= s
+        np.subtract(ubv, v, out=self._ub)
+        self._ub *= inv_dt
+        self._ub -= s
+        if self._n_rows:
+            Cq = tp.C @ qdot_c if widen else tp.l
+            Cv_s = tp.C @ (v * inv_dt + s)
+            np.minimum(tp.l, Cq, out=self._l)
+            self._l *= inv_dt
+            self._l -= Cv_s
+            np.maximum(tp.u, Cq if widen else tp.u, out=self._u)
+            self._u *= inv_dt
+            self._u -= Cv_s
+        return lbv, ubv
+
+    def _accelerate(
+        self,
+        tp: TickProblem,
+        drifts: list[np.ndarray],
+        qdot_c: np.ndarray,
+        widen: bool,
+        out: LevelOutcome,
+    ) -> np.ndarray:
+        """2. The resolved acceleration QP (CRAC eq. 9-14) and CRAC eq. 31; returns ``v+``."""
+        v, dt = tp.state.v, tp.dt
+        tb = time.perf_counter()
+        s = self.gains.gv * (qdot_c - v)  # (nv,) CRAC eq. 31 shift
+        lbv, ubv = self._transcribe_constraints(tp, qdot_c, s, widen)
+        blocks_a = self.acceleration_blocks(tp, drifts)
+        tp_a = TickProblem(
+            tp.state, dt, blocks_a, tp.C, self._l, self._u, self._lb, self._ub, tp.W,
+            tp.damping, tp.tick, tp.J_all, self.a_all,
+        )  # fmt: skip
+        out.build_time += time.perf_counter() - tb
+        tq = time.perf_counter()
+        res_a = self.strategy.solve(tp_a)
+        self.timings["acceleration_qp"] = time.perf_counter() - tq
+        out.solver_status = res_a.status
+        out.solve_time += res_a.solve_time
+        out.iterations += res_a.iterations
+        if res_a.success and res_a.x is not None and np.all(np.isfinite(res_a.x)):
+            alpha = res_a.x
+        else:
+            alpha = (qdot_c - v) * (1.0 / dt) - s
+            out.messages.append(
+                f"tick {tp.tick}: the acceleration QP failed (solver status "
+                f"{res_a.status}); applying the velocity-level solution qdot_c this tick."
+            )
+        self.alpha, self.qdot_c = alpha, qdot_c
+        v_next = v + (alpha + s) * dt  # CRAC eq. 31, integrated
+        # Solvers meet bounds to their tolerance; the box is cheap to meet exactly.
+        np.clip(v_next, lbv, ubv, out=v_next)
+        return v_next
+
+    def _finish(self, tp: TickProblem, out: LevelOutcome) -> None:
+        r"""3. Torques (CRAC eq. 30) and semi-implicit integration :math:`q^+ = q \oplus v^+ dt`."""
+        q, v, dt = tp.state.q, tp.state.v, tp.dt
+        # alpha_c of the motion actually applied (alpha + s up to the clip).
+        self.alpha_c = (out.v_next - v) * (1.0 / dt)
+        tr = time.perf_counter()
+        tau = pin.rnea(self.model, self._dyn_data, q, v, self.alpha_c).copy()
+        self.timings["dynamics"] = time.perf_counter() - tr
+        tau.setflags(write=False)
+        out.tau = tau
+        out.q_next = pin.integrate(self.model, q, out.v_next * dt)
 
     def __repr__(self) -> str:
         g = self.gains
         return (
             f"AccelerationLevel(kp={g.kp}, kv={g.kv}, gv={g.gv}, velocity_gain={g.velocity_gain}, "
-            f"damping={self.damping}, strategy={self.ctrl.strategy!r})"
+            f"damping={self.damping}, strategy={self.strategy!r})"
         )

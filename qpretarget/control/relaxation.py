@@ -29,9 +29,6 @@ constraints allow (and a hierarchy keeps its priorities). If that fails too, the
 Each slack is reported in ``StepResult.relaxed`` under its constraint's name, as the largest slack
 of its rows, in the rows' units ([m/s] or [rad/s]: multiply by ``dt`` for a displacement); the
 amount a box bound already gave in ``Controller.build_tick``'s merge is added.
-
-Until the controller calls a ``link(controller)`` hook itself, :func:`make_fallback` calls it on
-every constraint that has one (the support polygon uses it to find the contacts).
 """
 
 from __future__ import annotations
@@ -43,10 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from ..constraints.base import Constraint
 from ..errors import ConfigError, close_matches_hint
 from ..problem import QPProblem
 from ..solvers import ProxSuiteSolver, make_solver
+from ..strategies import TickProblem
 from ..validation import positive_float
 
 _KEYS = ("enabled", "ratio", "report_tolerance", "solver", "hard")
@@ -85,10 +82,6 @@ def make_fallback(controller: Any, spec: Mapping[str, Any] | None) -> Fallback |
     Raises:
         ConfigError: unknown keys or bad values, with the YAML path.
     """
-    for con in controller.constraints:
-        link = getattr(con, "link", None)
-        if link is not None:
-            link(controller)
     if spec is None:
         spec = {}
     if not isinstance(spec, Mapping):
@@ -195,16 +188,13 @@ class Fallback:
         # Row groups: constraint -> slice of the stacked rows.
         self.groups: list[tuple[str, slice]] = []
         i = 0
-        for con in controller._row_constraints:
+        for con in controller.row_constraints:
             self.groups.append((con.name, slice(i, i + con.n_rows)))
             i += con.n_rows
         w_rows = np.ones(m)
-        for name, sl in self.groups:
-            w_rows[sl] = self.weight_of[name]
-        base = Constraint.compute_bounds
-        self._bound_cons = [
-            c for c in controller._bound_constraints if type(c).compute_bounds is not base
-        ]
+        for name, rows in self.groups:
+            w_rows[rows] = self.weight_of[name]
+        self._bound_cons = [c for c in controller.bound_constraints if c.has_bounds]
         # Phase-1 QP: x = [v (nv); s- (m); s+ (m); b- (nv); b+ (nv)], rows
         #   l <= C v + s- - s+ <= u,   lb <= v + b- - b+ <= ub,   slacks >= 0.
         self._sl = {
@@ -276,7 +266,11 @@ class Fallback:
         return w_lo, w_hi, own_lo, own_hi
 
     # ------------------------------------------------------------------ solve
-    def solve(self, tp: Any, failed_result: Any = None) -> FallbackResult | None:
+    def reset(self) -> None:
+        """Drop the phase-1 solver's warm start (runs from ``Controller.reset`` reproduce)."""
+        self.solver.reset()
+
+    def solve(self, tp: TickProblem, failed_result: Any = None) -> FallbackResult | None:
         """Relax this tick's hard constraints in order of importance and solve again.
 
         Args:
@@ -322,7 +316,7 @@ class Fallback:
             amount = max(float(b_lo[mlo].max(initial=0.0)), float(b_hi[mhi].max(initial=0.0)))
             if amount > tol:
                 relaxed[con.name] = max(relaxed.get(con.name, 0.0), amount)
-        gave = getattr(self.controller, "_bound_gave", None) or {}
+        gave = tp.bound_gave
         for name in relaxed:
             relaxed[name] += gave.get(name, 0.0)
 

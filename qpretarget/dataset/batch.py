@@ -29,8 +29,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError, QPRetargetError
-from .atomic import write_atomic
+from ..errors import ConfigError, QPRetargetError, missing_dependency
+from ..fileio import write_atomic
 
 #: Columns of summary.csv, in order (per-task RMSE columns follow as ``rmse_mm/<task>``).
 SUMMARY_COLUMNS = (
@@ -269,10 +269,7 @@ def _ray(jobs: Sequence[ClipJob], workers: int, address: str | None) -> Iterator
     try:
         import ray
     except ImportError:
-        raise ConfigError(
-            '--engine ray needs Ray: pip install "qpretarget[ray]" '
-            '(from a clone: pip install -e ".[ray]").'
-        ) from None
+        raise missing_dependency("ray", "--engine ray (Ray)") from None
     started = not ray.is_initialized()
     if started:
         if address:

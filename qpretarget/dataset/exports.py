@@ -2,7 +2,7 @@
 r"""Export formats that learning pipelines read, one class each in :data:`EXPORTS`.
 
 ``--format csv,pkl,npz`` picks them; every file is written atomically (a temporary file renamed
-into place, :mod:`qpretarget.dataset.atomic`). Layouts (docs/formats.md cites the readers):
+into place, :mod:`qpretarget.fileio`). Layouts (docs/formats.md cites the readers):
 
 * ``csv`` — the layout of Unitree's retargeted LAFAN1 dataset, read by BeyondMimic's and mjlab's
   ``csv_to_npz`` (``np.loadtxt(file, delimiter=",")``; columns ``[:3]`` root position,
@@ -30,10 +30,10 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigError
+from ..fileio import atomic_path, write_atomic
 from ..registry import Registry
 from ..robot import RobotModel
 from ..trajectory import RobotTrajectory
-from .atomic import atomic_path, write_atomic
 
 #: Export formats by ``--format`` name.
 EXPORTS = Registry("export format")

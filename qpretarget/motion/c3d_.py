@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from ..errors import missing_dependency
 from ._kinematics import change_up_axis
 from .human_motion import HumanMotion, MotionFormatError
 
@@ -79,10 +80,8 @@ def read_c3d(
     """
     try:
         import c3d
-    except ImportError as exc:
-        raise ImportError(
-            "reading C3D files needs the `c3d` package: pip install 'qpretarget[mocap]'"
-        ) from exc
+    except ImportError:
+        raise missing_dependency("mocap", "reading C3D files (the c3d package)") from None
     path = Path(path)
     with path.open("rb") as handle:
         try:

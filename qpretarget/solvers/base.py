@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import abc
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -11,6 +12,7 @@ import numpy as np
 
 from ..errors import ConfigError, SolverError, close_matches_hint
 from ..problem import QPProblem
+from ..registry import Registry
 
 
 @dataclass(slots=True)
@@ -34,10 +36,48 @@ class QPSolution:
     extras: dict[str, Any] = field(default_factory=dict)
 
 
+#: Solver name (YAML ``solver: {name: ...}``) -> backend class. A backend registers itself with
+#: ``@SOLVERS.register("name")`` in its own module, imported by ``solvers/__init__.py``.
+SOLVERS = Registry("solver")
+
+
 class QPSolver(abc.ABC):
-    """A QP backend. ``solve`` may keep state (workspace, warm start) between calls."""
+    """A QP backend. ``solve`` may keep state (workspace, warm start) between calls.
+
+    A backend registers itself in :data:`SOLVERS`; :func:`make_solver` builds it with
+    :meth:`from_options`.
+    """
 
     name: ClassVar[str] = "solver"
+    #: How error messages call the backend.
+    label: ClassVar[str] = "solver"
+    #: Option keys the backend accepts (checked by the default :meth:`from_options`).
+    OPTIONS: ClassVar[tuple[str, ...]] = ()
+    #: The backend hands its options to another library unchecked (the qpsolvers adapter): its
+    #: names are not listed by :func:`qpretarget.schema.options`.
+    passes_options: ClassVar[bool] = False
+
+    @classmethod
+    def from_options(cls, name: str, options: dict[str, Any], *, path: str) -> QPSolver:
+        """Build the backend registered as ``name`` from its YAML options.
+
+        Raises:
+            ConfigError: an option not in :attr:`OPTIONS` (with close names).
+        """
+        allowed = cls.OPTIONS
+        for key in options:
+            if key not in allowed:
+                raise ConfigError(
+                    f"unknown {cls.label} option {key!r}.{close_matches_hint(key, allowed)} "
+                    f"Options: {', '.join(allowed)}.",
+                    path=f"{path}.{key}",
+                )
+        return cls(**options)
+
+    @classmethod
+    def option_keys(cls) -> list[str]:
+        """The YAML option keys this backend checks (empty: passed through to the backend)."""
+        return list(cls.OPTIONS)
 
     @abc.abstractmethod
     def solve(self, problem: QPProblem) -> QPSolution:
@@ -51,44 +91,45 @@ class QPSolver(abc.ABC):
         return {}
 
 
-def make_solver(spec: str | dict[str, Any] | None, *, path: str = "solver") -> QPSolver:
-    """Build a solver from a name or ``{name: ..., <options>}``.
+def split_solver_spec(spec: Any, *, path: str = "solver") -> tuple[str, dict[str, Any]]:
+    """Split a ``solver:`` entry (a name, or ``{name, <options>}``) into ``(name, options)``.
 
-    ``proxsuite`` is the native warm-started backend; any other name is handed to qpsolvers
-    (``osqp``, ``quadprog``, ``daqp``, ``clarabel``, ...).
+    ``None`` or no ``name`` gives ``proxsuite``; ``type:`` is accepted for ``name:``.
 
     Raises:
-        ConfigError: unknown option keys. SolverNotInstalledError: solver not installed.
+        ConfigError: the entry is neither a name nor a mapping.
     """
-    from .proxsuite_ import ProxSuiteSolver
-    from .qpsolvers_ import QpsolversSolver, known_qpsolvers
-
     if spec is None:
         spec = {"name": "proxsuite"}
     if isinstance(spec, str):
         spec = {"name": spec}
-    if not isinstance(spec, dict):
+    if not isinstance(spec, Mapping):
         raise ConfigError(f"solver must be a name or a mapping, got {spec!r}.", path=path)
-    spec = dict(spec)
-    name = spec.pop("name", None) or spec.pop("type", None) or "proxsuite"
-    if name == "proxsuite":
-        allowed = ProxSuiteSolver.OPTIONS
-        for key in spec:
-            if key not in allowed:
-                raise ConfigError(
-                    f"unknown ProxSuite option {key!r}.{close_matches_hint(key, allowed)} "
-                    f"Options: {', '.join(allowed)}.",
-                    path=f"{path}.{key}",
-                )
-        return ProxSuiteSolver(**spec)
-    known = known_qpsolvers()
-    if name not in known:
+    options = dict(spec)
+    name = options.pop("name", None) or options.pop("type", None) or "proxsuite"
+    return str(name), options
+
+
+def make_solver(spec: str | Mapping[str, Any] | None, *, path: str = "solver") -> QPSolver:
+    """Build a solver from a name or ``{name: ..., <options>}`` by looking it up in :data:`SOLVERS`.
+
+    ``proxsuite`` (the default) is the native warm-started backend; every name qpsolvers knows
+    (``osqp``, ``quadprog``, ``daqp``, ``clarabel``, ...) is registered by the qpsolvers adapter.
+
+    Raises:
+        ConfigError: unknown solver name (with close names) or option keys.
+        SolverNotInstalledError: the solver is known but not installed (says how to install it).
+    """
+    name, options = split_solver_spec(spec, path=path)
+    cls: type[QPSolver] | None = SOLVERS.get(name)
+    if cls is None:
+        known = sorted(SOLVERS)
         raise ConfigError(
-            f"solver {name!r} is not known.{close_matches_hint(name, ['proxsuite', *known])} "
-            f"Known: proxsuite, {', '.join(known)}.",
+            f"solver {name!r} is not known.{close_matches_hint(name, known)} "
+            f"Known: {', '.join(known)}.",
             path=f"{path}.name",
         )
-    return QpsolversSolver(name, **spec)
+    return cls.from_options(name, options, path=path)
 
 
-__all__ = ["QPSolution", "QPSolver", "SolverError", "make_solver"]
+__all__ = ["SOLVERS", "QPSolution", "QPSolver", "SolverError", "make_solver", "split_solver_spec"]

@@ -14,12 +14,13 @@ import numpy as np
 from proxsuite import proxqp
 
 from ..problem import INF, QPProblem
-from .base import QPSolution, QPSolver
+from .base import SOLVERS, QPSolution, QPSolver
 
 _SOLVED = proxqp.QPSolverOutput.PROXQP_SOLVED
 _STATUS: dict = {}
 
 
+@SOLVERS.register("proxsuite")
 class ProxSuiteSolver(QPSolver):
     """Warm-started dense ProxQP with native box constraints.
 
@@ -32,6 +33,7 @@ class ProxSuiteSolver(QPSolver):
     """
 
     name = "proxsuite"
+    label = "ProxSuite"
     OPTIONS = ("eps_abs", "eps_rel", "max_iter", "warm_start", "verbose")
 
     def __init__(
@@ -46,8 +48,9 @@ class ProxSuiteSolver(QPSolver):
         self.warm_start, self.verbose = bool(warm_start), bool(verbose)
         self._qp: Any = None
         self._shape: tuple[int, int] | None = None
-        self._l = self._u = None
-        self._keep = None
+        self._l: np.ndarray | None = None
+        self._u: np.ndarray | None = None
+        self._keep: np.ndarray | None = None
         self._fresh = True
 
     def reset(self) -> None:
@@ -67,6 +70,16 @@ class ProxSuiteSolver(QPSolver):
         if problem.n_in:
             np.maximum(problem.l, -INF, out=self._l)
             np.minimum(problem.u, INF, out=self._u)
+
+    def _result(self) -> tuple[np.ndarray | None, bool, Any]:
+        """``(x, solved, info)`` of the last ProxQP solve (``x`` ``None`` when not finite)."""
+        res = self._qp.results
+        info = res.info
+        ok = info.status == _SOLVED
+        x: np.ndarray | None = res.x.copy()
+        if not np.isfinite(x).all():
+            x, ok = None, False
+        return x, ok, info
 
     def solve(self, problem: QPProblem) -> QPSolution:
         t0 = time.perf_counter()
@@ -104,29 +117,18 @@ class ProxSuiteSolver(QPSolver):
             # a previous result before the first solve.
             self._qp.settings.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
             self._fresh = False
-        res = self._qp.results
-        info = res.info
-        status = info.status
-        ok = status == _SOLVED
-        x = res.x.copy()
-        if not np.isfinite(x).all():
-            x, ok = None, False
+        x, ok, info = self._result()
         if not ok and not self._fresh and self.warm_start:
             # A warm start far from the new solution can stall ProxQP: retry once cold.
             st = self._qp.settings
             st.initial_guess = proxqp.InitialGuess.NO_INITIAL_GUESS
             self._qp.solve()
             st.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-            res = self._qp.results
-            info = res.info
-            status = info.status
-            ok = status == _SOLVED
-            x = res.x.copy()
-            if not np.isfinite(x).all():
-                x, ok = None, False
+            x, ok, info = self._result()
         if not ok:
             # A failed solve leaves a poor warm start: rebuild the workspace next tick.
             self._shape = None
+        status = info.status
         name = _STATUS.get(status)
         if name is None:
             name = _STATUS[status] = str(status).split(".")[-1]

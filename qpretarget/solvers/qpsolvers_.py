@@ -18,7 +18,7 @@ import qpsolvers
 
 from ..errors import SolverNotInstalledError
 from ..problem import QPProblem
-from .base import QPSolution, QPSolver
+from .base import SOLVERS, QPSolution, QPSolver
 
 #: Tolerances set explicitly so results are comparable (qpsolvers' own defaults differ widely).
 DEFAULT_OPTIONS: dict[str, dict[str, Any]] = {
@@ -112,6 +112,13 @@ class QpsolversSolver(QPSolver):
         # Backends that print when told not to (see _quiet).
         self._silence = solver == "osqp" and not self.options.get("verbose", False)
 
+    passes_options = True
+
+    @classmethod
+    def from_options(cls, name: str, options: dict[str, Any], *, path: str) -> QPSolver:
+        """``QpsolversSolver(name, **options)``: options go to the backend unchecked."""
+        return cls(name, **options)
+
     def settings_summary(self) -> dict[str, Any]:
         return dict(self.options)
 
@@ -124,7 +131,7 @@ class QpsolversSolver(QPSolver):
             for key in ("P", "G", "A"):
                 if parts[key] is not None:
                     parts[key] = sparse.csc_matrix(parts[key])
-        qp = qpsolvers.Problem(**parts)
+        qp = qpsolvers.Problem(**parts)  # type: ignore[arg-type]  # None = no such block
         try:
             if self._silence:
                 with _quiet():
@@ -149,3 +156,9 @@ class QpsolversSolver(QPSolver):
             iterations=iters,
             solve_time=time.perf_counter() - t0,
         )
+
+
+# Every solver qpsolvers knows is a registered name (an uninstalled one says how to install it).
+for _name in known_qpsolvers():
+    if _name not in SOLVERS:  # the native backend keeps its own name
+        SOLVERS.add(_name, QpsolversSolver)

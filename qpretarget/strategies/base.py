@@ -35,6 +35,8 @@ class TickProblem:
         tick: tick counter.
         J_all, v_all: when set, every block's ``J`` / ``v_star`` are consecutive rows of these
             stacked buffers (in block order), so a strategy may use them in one product.
+        bound_gave: constraint name -> amount its box bound gave when the bounds were merged
+            (a less important bound conflicting with more important ones), in its own units.
     """
 
     state: RobotState
@@ -50,6 +52,7 @@ class TickProblem:
     tick: int
     J_all: np.ndarray | None = None
     v_all: np.ndarray | None = None
+    bound_gave: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(slots=True)

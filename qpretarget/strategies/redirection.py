@@ -37,7 +37,7 @@ hand over :math:`v^* = \dot p_r + K e` for the tick only, so the blend is applie
 itself: the error feedback is scaled by :math:`(1 - b)` as the pair closes in, which is the role of
 the decreasing :math:`K'`.
 
-Geometry is the shared :class:`qpretarget.collision.geometry.CollisionModel`, the one the QP's
+Geometry is the shared :class:`qpretarget.collision.model.CollisionModel`, the one the QP's
 ``self_collision`` rows use (one convex hull or capsule per link, docs/collisions.md): its
 witness points :math:`p_a, p_b` and unit normal :math:`n` (from :math:`a` to :math:`b`, signed:
 also valid in penetration), with the temporal-coherence broad phase, so only pairs that can be
@@ -57,7 +57,7 @@ YAML::
       critical_distance: 0.05     # d_c [m]
       blend_alpha: 15.0           # alpha of eq. 23 (paper figure: 15)
       blend_delta: 1.0            # delta of eq. 23 (0.5 or 1.0 in the paper)
-      geometry: convex_hull       # or capsule (qpretarget.collision.geometry)
+      geometry: convex_hull       # or capsule (qpretarget.collision.shapes)
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from ..collision.geometry import CollisionModel, link_shapes
+from ..collision import CollisionModel, link_shapes
 from ..constraints.self_collision import resolve_link
 from ..errors import ConfigError
 from ..robot import LWA, RobotModel, RobotState
@@ -112,7 +112,7 @@ class Redirection(Strategy):
         clamping: Poubel's clamping loop for the box bounds on the last step.
         ignore_rows: run even if the config has constraint rows (they are ignored).
         activation: pairs with :math:`b(d)` below this are not redirected (nor computed).
-        geometry: ``convex_hull`` or ``capsule`` link shapes (:mod:`qpretarget.collision.geometry`).
+        geometry: ``convex_hull`` or ``capsule`` link shapes (:mod:`qpretarget.collision.shapes`).
     """
 
     def __init__(
@@ -151,6 +151,7 @@ class Redirection(Strategy):
         #: reach, :func:`blending_reach`; lower bounds beyond), and its blending weight.
         self.last_distances = np.zeros(0)
         self.last_blend = 0.0
+        self._bound = False  # set by bind (the collision model exists from then on)
 
     def bind(self, robot: RobotModel, task_dims, n_rows, solver_factory) -> None:  # noqa: ANN001
         super().bind(robot, task_dims, n_rows, solver_factory)
@@ -181,10 +182,11 @@ class Redirection(Strategy):
         self._J = np.zeros((m, robot.nv))
         self._r = np.zeros(m)
         self.last_distances = np.full(self.collision.n_pairs, np.inf)
+        self._bound = True
 
     def reset(self) -> None:
         super().reset()
-        if hasattr(self, "collision"):
+        if self._bound:
             self.collision.invalidate()
 
     def collision_points(

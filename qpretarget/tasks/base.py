@@ -91,6 +91,8 @@ class Task(abc.ABC):
         self.dim = 0
         self.weight = np.zeros(0)
         self._ff = None  # target velocity estimate (k,)
+        #: Where the task sits in the YAML (``tasks[i]``), for error messages.
+        self.yaml_path = ""
         self.robot: RobotModel | None = None
         self._Jbuf: np.ndarray | None = None  # rows of the controller's stacked buffers
         self._vbuf: np.ndarray | None = None
@@ -136,6 +138,12 @@ class Task(abc.ABC):
     @abc.abstractmethod
     def compute_jacobian(self, state: RobotState) -> np.ndarray:
         """Task Jacobian (k, nv): ``J v`` is the task-space velocity."""
+
+    #: How the acceleration level gets this task's drift :math:`\dot J v` (CRAC eq. 9):
+    #: ``"zero"`` (constant Jacobian), ``"com"`` (pinocchio's CoM acceleration),
+    #: ``"analytic"`` (:meth:`compute_jdot_v`) or ``"finite_difference"`` of the Jacobian along
+    #: :math:`v` (the default, right for any task).
+    drift_kind: ClassVar[str] = "finite_difference"
 
     def compute_jdot_v(self, state: RobotState) -> np.ndarray:
         r"""Drift term :math:`\dot J v` (k,) for acceleration-level control (CRAC eq. 9)."""

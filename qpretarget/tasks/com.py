@@ -3,7 +3,7 @@ r"""Centre-of-mass task: :math:`e = c_r - c`, :math:`J = J_{com}` (rows of the c
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -25,6 +25,8 @@ class ComTask(Task):
         weight: weight [cost]/[m]^2 (scalar or one per axis).
         **kwargs: ``gain``, ``level``, ``feedforward``, ``recovery_time`` of :class:`Task`.
     """
+
+    drift_kind: ClassVar[str] = "com"
 
     def __init__(
         self,

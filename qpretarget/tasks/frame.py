@@ -15,7 +15,7 @@ orientation.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -68,6 +68,8 @@ class FrameTask(Task):
         weight: overall weight multiplying both.
         **kwargs: ``gain``, ``level``, ``feedforward``, ``recovery_time`` of :class:`Task`.
     """
+
+    drift_kind: ClassVar[str] = "analytic"
 
     def __init__(
         self,

@@ -8,7 +8,7 @@ is the usual posture regularization that resolves the redundancy of the key-poin
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -31,6 +31,8 @@ class PostureTask(Task):
     Targets accepted by ``step``: a full configuration (nq,), the actuated joint values
     (n_joints,), or a mapping joint name -> value [rad] (other joints keep their target).
     """
+
+    drift_kind: ClassVar[str] = "zero"
 
     def __init__(
         self,
@@ -110,6 +112,8 @@ class PostureTask(Task):
 @TASKS.register("damping")
 class DampingTask(Task):
     r"""Velocity damping: :math:`J = I`, :math:`v^* = 0` (Tikhonov term :math:`w |v|^2`)."""
+
+    drift_kind: ClassVar[str] = "zero"
 
     def __init__(self, name: str = "damping", *, weight: Any = 1e-3, level: int = 1) -> None:
         super().__init__(name, weight=weight, level=level)

@@ -296,7 +296,7 @@ class Viewer:
         """Draw a collision model's shapes (translucent) and its pairs (lines between centres)."""
         from scipy.spatial import ConvexHull
 
-        from ..collision.geometry import primitive_points
+        from ..collision import primitive_points
 
         data = self.data
         centres = {}

@@ -13,10 +13,12 @@ themselves in :data:`REGULARIZATIONS` from their own modules.
 from __future__ import annotations
 
 import abc
-from typing import Any, ClassVar
+from collections.abc import Sequence
+from typing import ClassVar
 
 import numpy as np
 
+from ..constraints.base import Constraint
 from ..registry import Registry
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
@@ -36,8 +38,8 @@ class Regularization(abc.ABC):
     def __init__(self, damping: float = 1e-3) -> None:
         self.damping = positive_float(damping, "damping (lambda)", allow_zero=True)
 
-    def bind(self, robot: RobotModel, controller: Any = None) -> None:
-        """Prepare buffers; ``controller`` gives access to constraint modules (collisions)."""
+    def bind(self, robot: RobotModel, constraints: Sequence[Constraint] = ()) -> None:
+        """Prepare buffers; ``constraints`` are the controller's (e.g. the collision pairs)."""
         self.robot = robot
         self._eye = np.eye(robot.nv)
         self._eye.setflags(write=False)

@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from qpretarget.collision.geometry import CollisionModel, obstacle_shape
+from qpretarget.collision import CollisionModel, obstacle_shape
 from qpretarget.constraints.ground import Ground
 from qpretarget.control.controller import Controller
 from qpretarget.errors import ConfigError

@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from qpretarget.collision.geometry import CollisionModel
+from qpretarget.collision import CollisionModel
 from qpretarget.constraints.self_collision import SelfCollision
 from qpretarget.control.controller import Controller
 from qpretarget.errors import ConfigError, UnknownNameError

@@ -48,6 +48,9 @@ def test_bundled_maps_are_listed():
         "cgspeed",
         "cmu",
         "human_description",
+        "lafan1",
+        "mixamo",
+        "mvn_bvh",
         "opensim_walking",
         "pyomeca_upper_limb",
     ]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from qpretarget import Controller, load_robot
-from qpretarget.collision.geometry import CollisionModel
+from qpretarget.collision import CollisionModel
 from qpretarget.errors import UnknownNameError
 from qpretarget.strategies.nullspace import weighted_prioritized_dls
 from qpretarget.strategies.redirection import blending, blending_reach
