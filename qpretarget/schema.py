@@ -13,7 +13,7 @@ key                value                                                  defaul
 ``level``          ``velocity`` or ``acceleration``                       ``velocity``
 ``strategy``       registered strategy: name or ``{type, <its keys>}``    ``augmentation``
 ``regularization`` registered metric: name or ``{type, <its keys>}``      ``identity``
-``solver``         registered solver: name or ``{name, <its options>}``   ``proxsuite``
+``solver``         registered solver: name or ``{name, <its options>}``   ``daqp``
 ``tasks``          list of ``{type, <its keys>}`` (at least one)          required
 ``constraints``    list of ``{type, <its keys>}``                         ``[]``
 ``fallback``       ``{enabled, ratio, report_tolerance, solver}``         enabled

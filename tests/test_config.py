@@ -101,10 +101,10 @@ def test_yaml_numbers_without_exponent_sign_are_floats(configs_dir, tmp_path) ->
     }  # fmt: skip
     text = (configs_dir / "g1_augmentation.yaml").read_text()
     p = tmp_path / "g1.yaml"
-    p.write_text(text.replace("eps_abs: 1.0e-9", "eps_abs: 2e-9", 1))
-    assert "eps_abs: 2e-9" in p.read_text()
+    p.write_text(text.replace("solver: {name: daqp}", "solver: {name: daqp, primal_tol: 2e-9}", 1))
+    assert "primal_tol: 2e-9" in p.read_text()
     ctrl = Controller.from_yaml(p)
-    assert ctrl.config["solver"]["eps_abs"] == 2e-9
+    assert ctrl.config["solver"]["primal_tol"] == 2e-9
 
 
 def test_missing_file() -> None:

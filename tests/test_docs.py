@@ -87,6 +87,7 @@ def _signature_options(cls: type) -> dict[str, Any]:
 def accepted() -> dict[str, dict[str, dict[str, Any]]]:
     """section -> type -> key -> default (``REQUIRED`` when there is none)."""
     from qpretarget.constraints import CONSTRAINTS
+    from qpretarget.solvers.daqp_ import DaqpSolver
     from qpretarget.solvers.proxsuite_ import ProxSuiteSolver
     from qpretarget.strategies import STRATEGIES
     from qpretarget.tasks import TASKS
@@ -99,8 +100,10 @@ def accepted() -> dict[str, dict[str, dict[str, Any]]]:
         "regularization": REGULARIZATIONS,
     }
     out = {s: {t: _signature_options(c) for t, c in r.items()} for s, r in registries.items()}
-    prox = _signature_options(ProxSuiteSolver)
-    out["solver"] = {"proxsuite": {k: prox[k] for k in ProxSuiteSolver.OPTIONS}}
+    out["solver"] = {}
+    for cls in (ProxSuiteSolver, DaqpSolver):
+        sig = _signature_options(cls)
+        out["solver"][cls.name] = {k: sig[k] for k in cls.OPTIONS}
     try:
         from qpretarget.schema import options  # type: ignore[import-not-found, unused-ignore]
     except ImportError:

@@ -14,7 +14,13 @@ from qpretarget import Controller, schema
 from qpretarget.constraints import CONSTRAINTS
 from qpretarget.control import acceleration, controller, levels, result, velocity
 from qpretarget.errors import ConfigError, SolverNotInstalledError
-from qpretarget.solvers import SOLVERS, ProxSuiteSolver, QpsolversSolver, make_solver
+from qpretarget.solvers import (
+    SOLVERS,
+    DaqpSolver,
+    ProxSuiteSolver,
+    QpsolversSolver,
+    make_solver,
+)
 from qpretarget.strategies import STRATEGIES
 from qpretarget.tasks import TASKS
 from qpretarget.weighting import REGULARIZATIONS
@@ -58,10 +64,10 @@ def test_options_list_every_registered_type_and_its_constructor_keys() -> None:
 
 
 def test_solver_registry_holds_native_and_qpsolvers_backends() -> None:
-    assert SOLVERS["proxsuite"] is ProxSuiteSolver
-    assert SOLVERS["osqp"] is QpsolversSolver and SOLVERS["daqp"] is QpsolversSolver
-    assert isinstance(make_solver(None), ProxSuiteSolver)
-    assert isinstance(make_solver({"name": "daqp"}), QpsolversSolver)
+    assert SOLVERS["proxsuite"] is ProxSuiteSolver and SOLVERS["daqp"] is DaqpSolver
+    assert SOLVERS["osqp"] is QpsolversSolver and SOLVERS["qpsolvers/daqp"] is QpsolversSolver
+    assert isinstance(make_solver(None), DaqpSolver)  # the default backend
+    assert isinstance(make_solver({"name": "qpsolvers/daqp"}), QpsolversSolver)
     with pytest.raises(ConfigError, match=r"solver\.name: solver 'dap' is not known\. Did you"):
         make_solver("dap")
     with pytest.raises(SolverNotInstalledError, match="pip install"):

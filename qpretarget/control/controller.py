@@ -36,6 +36,7 @@ from ..errors import ConfigError, TargetError, close_matches_hint
 from ..registry import build_from_spec
 from ..robot import RobotModel, RobotState, load_robot
 from ..solvers import make_solver
+from ..solvers.base import DEFAULT_SOLVER
 from ..strategies import STRATEGIES, Strategy, TickProblem
 from ..tasks import TASKS, Task
 from ..weighting.base import REGULARIZATIONS, Regularization
@@ -124,7 +125,7 @@ class Controller:
             path="regularization",
         )
         self.regularization.bind(self.robot, self.constraints)
-        self.solver_spec = cfg.get("solver", {"name": "proxsuite"})
+        self.solver_spec = cfg.get("solver", {"name": DEFAULT_SOLVER})
         make_solver(self.solver_spec, path="solver")  # validate now, not at the first tick
         self.strategy: Strategy = self._build_strategy()
         self._C = np.zeros((self.n_rows, self.robot.nv))

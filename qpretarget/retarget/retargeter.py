@@ -591,7 +591,7 @@ def whole_body_config(
             "dt": 0.01,
             "strategy": {"type": "augmentation"},
             "regularization": {"type": "identity", "damping": 0.3},
-            "solver": {"name": "proxsuite", "eps_abs": 1.0e-9},
+            "solver": {"name": "daqp"},
             "tasks": tasks + support_tasks + [posture],
             "constraints": [
                 {"type": "joint_limits", "gain": 0.95},

@@ -6,6 +6,7 @@ with a ``@SOLVERS.register("name")`` class, and its import line below.
 """
 
 from .base import SOLVERS, QPSolution, QPSolver, make_solver, split_solver_spec
+from .daqp_ import DaqpSolver
 from .proxsuite_ import ProxSuiteSolver
 from .qpsolvers_ import QpsolversSolver, installed_qpsolvers, known_qpsolvers
 
@@ -16,6 +17,7 @@ __all__ = [
     "make_solver",
     "split_solver_spec",
     "ProxSuiteSolver",
+    "DaqpSolver",
     "QpsolversSolver",
     "installed_qpsolvers",
     "known_qpsolvers",

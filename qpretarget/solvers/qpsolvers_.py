@@ -35,7 +35,13 @@ DEFAULT_OPTIONS: dict[str, dict[str, Any]] = {
     },
     "proxqp": {"eps_abs": 1e-9, "eps_rel": 0.0},
     "clarabel": {"tol_gap_abs": 1e-9, "tol_gap_rel": 1e-9, "tol_feas": 1e-9},
-    "piqp": {"eps_abs": 1e-9, "eps_rel": 1e-9},
+    "piqp": {
+        "eps_abs": 1e-9,
+        "eps_rel": 1e-9,
+        "eps_duality_gap_abs": 1e-10,
+        "eps_duality_gap_rel": 1e-10,
+    },  # fmt: skip
+    "qpalm": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iter": 100000},
     "daqp": {},
     "quadprog": {},
 }
@@ -117,14 +123,15 @@ class QpsolversSolver(QPSolver):
     @classmethod
     def from_options(cls, name: str, options: dict[str, Any], *, path: str) -> QPSolver:
         """``QpsolversSolver(name, **options)``: options go to the backend unchecked."""
-        return cls(name, **options)
+        return cls(name.removeprefix("qpsolvers/"), **options)
 
     def settings_summary(self) -> dict[str, Any]:
         return dict(self.options)
 
     def solve(self, problem: QPProblem) -> QPSolution:
         t0 = time.perf_counter()
-        parts = problem.split()
+        # Copies: some backends (piqp, qpalm) write into their inputs, which may be read-only.
+        parts = {k: None if a is None else np.array(a) for k, a in problem.split().items()}
         if self.name in SPARSE_SOLVERS:  # they take CSC matrices (and warn on dense ones)
             from scipy import sparse
 
@@ -140,7 +147,9 @@ class QpsolversSolver(QPSolver):
                 sol = qpsolvers.solve_problem(qp, solver=self.name, **self.options)
         except Exception as exc:  # a backend error is a failed tick, not a crash of the loop
             return QPSolution(None, False, f"error: {exc}", solve_time=time.perf_counter() - t0)
-        x = sol.x if sol.x is not None and np.all(np.isfinite(sol.x)) else None
+        # A copy: piqp and qpalm return read-only views of their own memory.
+        x = np.array(sol.x, dtype=float) if sol.x is not None else None
+        x = x if x is not None and np.all(np.isfinite(x)) else None
         iters = -1
         extras = getattr(sol, "extras", {}) or {}
         info = extras.get("info")
@@ -158,7 +167,10 @@ class QpsolversSolver(QPSolver):
         )
 
 
-# Every solver qpsolvers knows is a registered name (an uninstalled one says how to install it).
+# Every solver qpsolvers knows is a registered name (an uninstalled one says how to install it),
+# also as ``qpsolvers/<name>`` so that a solver with a native backend here (daqp) can still be
+# run through qpsolvers, e.g. to compare the two.
 for _name in known_qpsolvers():
-    if _name not in SOLVERS:  # the native backend keeps its own name
+    SOLVERS.add(f"qpsolvers/{_name}", QpsolversSolver)
+    if _name not in SOLVERS:  # a native backend keeps its own name
         SOLVERS.add(_name, QpsolversSolver)

@@ -27,8 +27,9 @@ GOLDEN = Path(__file__).resolve().parent / "golden.npz"
 #: Solver of every golden run. ProxSuite's dense solver is not bit-reproducible (the same QP
 #: solved twice in one process can differ in the last bit: its workspace alignment varies, see
 #: docs/reliability.md), and chaotic clips amplify that; daqp is, so the golden runs use it and
-#: test every other part of the tick to the last bit.
-SOLVER = {"name": "daqp"}
+#: test every other part of the tick to the last bit. Recorded through qpsolvers' daqp (cold
+#: start each tick), before the direct hot-started backend existed: that path is kept as is.
+SOLVER = {"name": "qpsolvers/daqp"}
 
 
 def _controller(path: Path):  # noqa: ANN202
