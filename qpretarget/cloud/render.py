@@ -440,9 +440,9 @@ class HumanPoser:
         """Configurations (T, nq) of the model following a clip.
 
         Args:
-            keypoints: key-point -> (T, 3) world positions [m] (z up), e.g. ``motion.keypoints()``.
+            keypoints: key-point -> (T, 3) world positions [m] (z up), e.g. ``keypoint_positions(motion)``.
             orientations: ``waist``/``torso``/``head`` -> (T, 3, 3) world rotations relative to the
-                clip's rest pose facing +x (``motion.keypoint_orientations()``).
+                clip's rest pose facing +x (``keypoint_orientations(motion)``).
         """
         T = len(next(iter(keypoints.values())))
         ctrl = self.controller
@@ -538,7 +538,7 @@ def human_clip_sequence(
     floor is put at z = 0 under the lowest point of the first frame.
 
     Args:
-        keypoints: clip key-points, name -> (T, 3) [m], z up (``motion.keypoints()``).
+        keypoints: clip key-points, name -> (T, 3) [m], z up (``keypoint_positions(motion)``).
         orientations: ``waist``/``torso``/``head`` -> (T, 3, 3) (``keypoint_orientations()``).
         t: (T,) clip times [s].
         calibration_frames: frames moving from the calibration posture into the clip.

@@ -17,6 +17,8 @@ from .keypoints import (
     KeypointMapError,
     KeypointSource,
     guess_keypoint_map,
+    keypoint_orientations,
+    keypoint_positions,
     list_keypoint_maps,
     load_keypoint_map,
 )
@@ -36,6 +38,8 @@ __all__ = [
     "UnknownMotionJointError",
     "find_asf",
     "guess_keypoint_map",
+    "keypoint_orientations",
+    "keypoint_positions",
     "list_keypoint_maps",
     "load_keypoint_map",
     "load_motion",

@@ -12,15 +12,12 @@ import difflib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from ..errors import QPRetargetError
-
-if TYPE_CHECKING:
-    from .keypoints import KeypointMap
 
 
 class MotionError(QPRetargetError):
@@ -246,42 +243,6 @@ class HumanMotion:
                 "use positions only"
             )
         return self.orientations[:, index]
-
-    def keypoints(
-        self, kmap: KeypointMap | str | Path | Mapping[str, Any] | None = None
-    ) -> dict[str, np.ndarray]:
-        """Key-point positions in [m], one ``(T, 3)`` array per key-point of the map.
-
-        Args:
-            kmap: A :class:`~qpretarget.motion.keypoints.KeypointMap`, the name of a bundled map
-                (``"cmu"``, ``"cgspeed"``, ...), a path to a YAML map, a dict in the YAML format,
-                or ``None`` to pick a bundled map with
-                :func:`~qpretarget.motion.keypoints.guess_keypoint_map`.
-
-        Returns:
-            Key-point name -> positions. A key-point averaging several points is NaN at frames
-            where any of them is NaN.
-
-        Raises:
-            UnknownMotionJointError: If the map names a joint the motion does not have.
-            KeypointMapError: If the map cannot be loaded or guessed.
-        """
-        from .keypoints import resolve_keypoint_map
-
-        return resolve_keypoint_map(kmap, self).positions(self)
-
-    def keypoint_orientations(
-        self, kmap: KeypointMap | str | Path | Mapping[str, Any] | None = None
-    ) -> dict[str, np.ndarray]:
-        """Key-point orientations listed in the map's ``orientations`` section, ``(T, 3, 3)`` each.
-
-        Raises:
-            UnknownMotionJointError: If the map names a joint the motion does not have.
-            ValueError: If the map lists orientations but the motion has none.
-        """
-        from .keypoints import resolve_keypoint_map
-
-        return resolve_keypoint_map(kmap, self).orientations_of(self)
 
     # ----------------------------------------------------------------------------- subsets
 

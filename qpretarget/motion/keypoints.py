@@ -421,7 +421,7 @@ def guess_keypoint_map(motion: HumanMotion) -> KeypointMap:
         f"no bundled key-point map fits {motion.source or 'the motion'} "
         f"({len(motion.names)} joints, e.g. {list(motion.names[:5])}); closest is {best_name!r}, "
         f"which lacks {missing[:8]}. Write a YAML map (format in docs/motion.md) and pass its "
-        "path, e.g. motion.keypoints('my_skeleton.yaml')."
+        "path, e.g. keypoint_positions(motion, 'my_skeleton.yaml')."
     )
 
 
@@ -430,6 +430,45 @@ def resolve_keypoint_map(
 ) -> KeypointMap:
     """``kmap`` loaded with :func:`load_keypoint_map`, or guessed for ``motion`` when ``None``."""
     return guess_keypoint_map(motion) if kmap is None else load_keypoint_map(kmap)
+
+
+KeypointMapLike = KeypointMap | str | Path | Mapping[str, Any] | None
+
+
+def keypoint_positions(motion: HumanMotion, kmap: KeypointMapLike = None) -> dict[str, np.ndarray]:
+    """Key-point positions of ``motion`` in [m], one ``(T, 3)`` array per key-point of the map.
+
+    Args:
+        motion: The human motion.
+        kmap: A :class:`KeypointMap`, the name of a bundled map (``"cmu"``, ``"cgspeed"``, ...),
+            a path to a YAML map, a dict in the YAML format, or ``None`` to pick a bundled map
+            with :func:`guess_keypoint_map`.
+
+    Returns:
+        Key-point name -> positions. A key-point averaging several points is NaN at frames where
+        any of them is NaN.
+
+    Raises:
+        UnknownMotionJointError: If the map names a joint the motion does not have.
+        KeypointMapError: If the map cannot be loaded or guessed.
+    """
+    return resolve_keypoint_map(kmap, motion).positions(motion)
+
+
+def keypoint_orientations(
+    motion: HumanMotion, kmap: KeypointMapLike = None
+) -> dict[str, np.ndarray]:
+    """Key-point orientations listed in the map's ``orientations`` section, ``(T, 3, 3)`` each.
+
+    Args:
+        motion: The human motion (with joint orientations: BVH, ASF/AMC).
+        kmap: As for :func:`keypoint_positions`.
+
+    Raises:
+        UnknownMotionJointError: If the map names a joint the motion does not have.
+        ValueError: If the map lists orientations but the motion has none.
+    """
+    return resolve_keypoint_map(kmap, motion).orientations_of(motion)
 
 
 __all__ = [
@@ -441,6 +480,8 @@ __all__ = [
     "KeypointSource",
     "guess_keypoint_map",
     "identity_keypoint_map",
+    "keypoint_orientations",
+    "keypoint_positions",
     "list_keypoint_maps",
     "load_keypoint_map",
     "resolve_keypoint_map",

@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConfigError, TargetError, close_matches_hint
+from ..motion.keypoints import keypoint_orientations, keypoint_positions
 from ..robot import RobotModel, RobotState
 from ..tasks.chain_shape import ChainShapeTask, ShapeErrors
 
@@ -408,10 +409,10 @@ def torso_rotations(motion: HumanMotion) -> np.ndarray:
     """
     if motion.orientations is not None:
         try:
-            return np.asarray(motion.keypoint_orientations()["torso"], dtype=float)
+            return np.asarray(keypoint_orientations(motion)["torso"], dtype=float)
         except KeyError:
             pass
-    k = motion.keypoints()
+    k = keypoint_positions(motion)
     try:
         y = k["left_shoulder"] - k["right_shoulder"]
         up_from = k["waist"]
@@ -464,7 +465,7 @@ def arm_chain(
         raise ValueError(
             f"plane must be one of {sorted(PLANES)} (with frame='torso'), got {plane!r}."
         )
-    k = motion.keypoints()
+    k = keypoint_positions(motion)
     P = np.stack([np.asarray(k[f"{side}_{p}"], dtype=float) for p in points], axis=1)  # (T, n, 3)
     P = P - P[:, :1]
     if frame == "torso":

@@ -23,6 +23,7 @@ from qpretarget.cloud.em import CloudRetargeter
 from qpretarget.cloud.render import human_clip_sequence
 from qpretarget.constraints.support_polygon import convex_hull_2d
 from qpretarget.motion import load_motion
+from qpretarget.motion.keypoints import keypoint_orientations, keypoint_positions
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "cloud_g1.yaml"
 CLIP = "cmu_14_37_drink_soda.bvh"
@@ -36,8 +37,8 @@ ACCEPTANCE_DEG = 15.0
 def human_run(mocap, g1):
     motion = load_motion(mocap / CLIP)
     idx = np.arange(0, STEP * FRAMES, STEP)
-    kp = {k: v[idx] for k, v in motion.keypoints().items()}
-    ori = {k: v[idx] for k, v in motion.keypoint_orientations().items()}
+    kp = {k: v[idx] for k, v in keypoint_positions(motion).items()}
+    ori = {k: v[idx] for k, v in keypoint_orientations(motion).items()}
     syn, poser = human_clip_sequence(kp, ori, motion.t[idx], calibration_frames=4)
     fitter = CloudRetargeter(CloudConfig.from_yaml(CONFIG), robot=g1)
     traj, results = fitter.run(syn.sequence)

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from qpretarget.motion import MotionFormatError, UnknownMotionJointError, read_c3d
+from qpretarget.motion.keypoints import keypoint_positions
 
 PYOMECA = "pyomeca_upper_limb_box_lift.c3d"
 
@@ -46,7 +47,9 @@ def test_marker_map_gives_keypoints(mocap):
     elbow = (raw.joint("Daphnee:EPICl") + raw.joint("Daphnee:EPICm")) / 2
     np.testing.assert_allclose(motion.joint("right_elbow"), elbow, atol=1e-12)
     # A motion made of key-points maps to itself.
-    np.testing.assert_array_equal(motion.keypoints()["right_wrist"], motion.joint("right_wrist"))
+    np.testing.assert_array_equal(
+        keypoint_positions(motion)["right_wrist"], motion.joint("right_wrist")
+    )
 
 
 def test_marker_map_as_dict_and_average_propagates_nan(mocap):

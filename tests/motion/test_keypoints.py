@@ -17,6 +17,7 @@ from qpretarget.motion import (
     list_keypoint_maps,
     load_keypoint_map,
 )
+from qpretarget.motion.keypoints import keypoint_orientations, keypoint_positions
 
 CMU_CLIPS = [
     "cmu_14_37_drink_soda.bvh",
@@ -62,7 +63,7 @@ def test_map_sources_exist_in_clip_and_are_guessed(load_clip, clip, map_name):
     kmap = load_keypoint_map(map_name)
     assert kmap.missing_in(motion.names) == []
     assert guess_keypoint_map(motion).name == map_name
-    keypoints = motion.keypoints(kmap)
+    keypoints = keypoint_positions(motion, kmap)
     assert list(keypoints) == list(kmap.keypoints)
     for name, points in keypoints.items():
         assert points.shape == (len(motion), 3)
@@ -78,21 +79,21 @@ def test_skeleton_maps_cover_dariush_and_legs(map_name):
 
 
 def test_cmu_map_on_bvh_and_amc_agree(load_clip):
-    bvh = load_clip("cmu_16_15_walk.bvh").keypoints("cmu")
-    amc = load_clip("cmu_16_15.amc")[2:].keypoints("cmu")  # the BVH starts at AMC frame 3
+    bvh = keypoint_positions(load_clip("cmu_16_15_walk.bvh"), "cmu")
+    amc = keypoint_positions(load_clip("cmu_16_15.amc")[2:], "cmu")  # the BVH starts at AMC frame 3
     for name in bvh:
         np.testing.assert_allclose(bvh[name], amc[name], atol=1e-5)
 
 
 def test_head_is_between_skull_base_and_top(load_clip):
     motion = load_clip("cmu_14_37_drink_soda.bvh")
-    head = motion.keypoints("cmu")["head"]
+    head = keypoint_positions(motion, "cmu")["head"]
     np.testing.assert_allclose(head, (motion.joint("head") + motion.joint("head_end")) / 2)
 
 
 def test_orientations_come_from_the_named_joints(load_clip):
     motion = load_clip("cmu_16_15_walk.bvh")
-    orientations = motion.keypoint_orientations("cmu")
+    orientations = keypoint_orientations(motion, "cmu")
     assert list(orientations) == ["waist", "torso", "head"]
     np.testing.assert_array_equal(orientations["torso"], motion.joint_orientation("thorax"))
     # Walking along +X with the CMU rest pose facing +X: pelvis heading stays near 0.
@@ -102,8 +103,9 @@ def test_orientations_come_from_the_named_joints(load_clip):
 
 def test_marker_motion_has_no_orientations(load_clip):
     with pytest.raises(ValueError, match="has no orientations"):
-        load_clip("opensim_walking2.c3d").keypoint_orientations(
-            {"keypoints": {"neck": "C7"}, "orientations": {"waist": "LASI"}}
+        keypoint_orientations(
+            load_clip("opensim_walking2.c3d"),
+            {"keypoints": {"neck": "C7"}, "orientations": {"waist": "LASI"}},
         )
 
 

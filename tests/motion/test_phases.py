@@ -8,6 +8,7 @@ import pinocchio as pin
 import pytest
 
 from qpretarget.motion import Butterworth
+from qpretarget.motion.keypoints import keypoint_positions
 from qpretarget.motion.phases import (
     PhaseThresholds,
     SequencerSettings,
@@ -23,7 +24,7 @@ from qpretarget.motion.phases import (
 def _phases(load_clip, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Phases of a clip with the pipeline's defaults: 7 Hz zero-phase Butterworth, then detection."""
     motion = load_clip(name)
-    kp = motion.keypoints("cmu")
+    kp = keypoint_positions(motion, "cmu")
     bw = Butterworth(7.0, motion.rate)
     feet = {
         side: np.stack([bw.filtfilt(kp[f"{side}_ankle"]), bw.filtfilt(kp[f"{side}_toe"])], axis=1)

@@ -18,6 +18,7 @@ from qpretarget.motion.calibration import (
     rotation_z,
     triad,
 )
+from qpretarget.motion.keypoints import keypoint_orientations, keypoint_positions
 from qpretarget.motion.scaling import Scaler, limit_leg_extension
 from qpretarget.retarget.retargeter import default_robot_keypoints
 from qpretarget.robot import load_robot
@@ -55,7 +56,7 @@ def g1_points() -> dict[str, np.ndarray]:
 @pytest.fixture(scope="module")
 def walk(load_clip) -> tuple[HumanMotion, dict[str, np.ndarray]]:
     motion = load_clip("cmu_16_15_walk.bvh")
-    return motion, motion.keypoints("cmu")
+    return motion, keypoint_positions(motion, "cmu")
 
 
 def _frame(points: dict[str, np.ndarray], k: int) -> dict[str, np.ndarray]:
@@ -174,7 +175,7 @@ def test_initial_heading_is_aligned_to_the_robot(walk, g1_points, angle_deg):
     R = rotation_z(math.radians(angle_deg))
     shift = np.array([2.0, -3.0, 0.0])
     turned = {k: v @ R.T + shift for k, v in points.items()}
-    rots = motion.keypoint_orientations("cmu")["waist"]
+    rots = keypoint_orientations(motion, "cmu")["waist"]
     cal_a = calibrate(_frame(points, 0), g1_points, human_waist_rotation=rots[0])
     cal_b = calibrate(_frame(turned, 0), g1_points, human_waist_rotation=R @ rots[0])
     expected_yaw = math.remainder(cal_a.yaw - math.radians(angle_deg), 2 * math.pi)
