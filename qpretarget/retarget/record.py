@@ -1,0 +1,107 @@
+# SPDX-License-Identifier: Apache-2.0
+"""What a retargeting run records every tick, and the :class:`RobotTrajectory` built from it."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from ..control.controller import Controller, StepResult
+from ..trajectory import RobotTrajectory
+
+
+class RunRecorder:
+    """Per-tick records of one run (configurations, statuses, contacts, targets, scaled points).
+
+    Args:
+        controller: The controller of the run.
+        contacts: Its ``contacts`` constraint (``None`` without one).
+    """
+
+    def __init__(self, controller: Controller, contacts: Any) -> None:
+        self.controller = controller
+        self.contacts = contacts
+        self.rows: dict[str, list[Any]] = {
+            k: []
+            for k in ("t", "q", "v", "status", "solve_time", "tau", "contacts", "phase",
+                      "support", "messages")
+        }  # fmt: skip
+        self.pos_tasks = [
+            n for n, t in controller.tasks.items() if getattr(t, "has_position", False)
+        ]
+        self.targets: dict[str, list[np.ndarray]] = {n: [] for n in self.pos_tasks}
+        self.actual: dict[str, list[np.ndarray]] = {n: [] for n in self.pos_tasks}
+        self.scaled: dict[str, list[np.ndarray]] = {}
+        self.extra: dict[str, list[Any]] = {}
+
+    def __len__(self) -> int:
+        """Ticks recorded."""
+        return len(self.rows["t"])
+
+    def add(
+        self, t: float, res: StepResult, phase: str, support: str, scaled: Mapping[str, np.ndarray]
+    ) -> None:
+        """Record one tick."""
+        r = self.rows
+        ctrl = self.controller
+        r["t"].append(t)
+        r["q"].append(np.array(res.q))
+        r["v"].append(np.array(res.v))
+        r["status"].append(res.status)
+        r["solve_time"].append(res.solve_time)
+        r["tau"].append(None if res.tau is None else np.array(res.tau))
+        r["phase"].append(phase)
+        r["support"].append(support)
+        if res.messages:
+            r["messages"].extend(res.messages)
+        if self.contacts is not None:
+            active = set(self.contacts.active_feet)
+            r["contacts"].append([n in active for n in self.contacts.names])
+        for n in self.pos_tasks:
+            task = ctrl.tasks[n]
+            self.targets[n].append(np.array(task.position_target, float))
+            self.actual[n].append(task.current_pose(ctrl.state)[0].copy())
+        for k, v in scaled.items():
+            self.scaled.setdefault(k, []).append(np.asarray(v, float).copy())
+
+    def trajectory(self, human: dict[str, np.ndarray], meta: dict[str, Any]) -> RobotTrajectory:
+        """The records as a :class:`RobotTrajectory` (``human``: raw key-points and ``t``)."""
+        r = self.rows
+        ctrl = self.controller
+        T = len(r["t"])
+        taus = r["tau"]
+        tau = np.array(taus) if all(x is not None for x in taus) else None
+        extra: dict[str, np.ndarray] = {
+            "human_phase": np.asarray(r["phase"], dtype=str),
+            "support_state": np.asarray(r["support"], dtype=str),
+        }
+        for k, v in self.scaled.items():
+            extra[f"scaled/{k}"] = np.asarray(v, float)
+        for k, v in self.extra.items():
+            extra[k] = np.asarray(v)
+        return RobotTrajectory(
+            t=np.asarray(r["t"], float),
+            q=np.asarray(r["q"], float),
+            v=np.asarray(r["v"], float),
+            joint_names=list(ctrl.robot.joint_names),
+            robot=ctrl.robot.name,
+            config_yaml=ctrl.config_yaml,
+            task_names=list(self.pos_tasks),
+            targets={n: np.asarray(v, float) for n, v in self.targets.items()},
+            actual={n: np.asarray(v, float) for n, v in self.actual.items()},
+            contacts=np.asarray(r["contacts"], bool).reshape(T, -1)
+            if self.contacts is not None
+            else None,
+            foot_names=list(self.contacts.names) if self.contacts is not None else [],
+            status=np.asarray(r["status"], dtype=str),
+            solve_time=np.asarray(r["solve_time"], float),
+            tau=tau,
+            human=human,
+            extra=extra,
+            meta=meta,
+        )
+
+
+__all__ = ["RunRecorder"]
