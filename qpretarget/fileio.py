@@ -44,8 +44,11 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
         raise
 
 
-def write_atomic(path: str | Path, writer: Callable[[IO[Any]], None], *, binary: bool) -> Path:
-    """Open a temporary file, let ``writer`` fill it, rename it to ``path``; return ``path``."""
+def write_atomic(path: str | Path, writer: Callable[[IO[Any]], object], *, binary: bool) -> Path:
+    """Open a temporary file, let ``writer`` fill it, rename it to ``path``; return ``path``.
+
+    ``writer``'s return value (e.g. ``f.write``'s count) is ignored.
+    """
     path = Path(path)
     with (
         atomic_path(path) as tmp,

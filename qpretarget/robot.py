@@ -330,6 +330,20 @@ class RobotModel:
         )
 
 
+def _floats3(values: Sequence[Any]) -> tuple[float, float, float]:
+    """Three floats; a TypeError (reported as a ConfigError by the caller) otherwise."""
+    if len(values) != 3:
+        raise TypeError(f"expected 3 numbers, got {len(values)}")
+    return float(values[0]), float(values[1]), float(values[2])
+
+
+def _floats4(values: Sequence[Any]) -> tuple[float, float, float, float]:
+    """Four floats; a TypeError (reported as a ConfigError by the caller) otherwise."""
+    if len(values) != 4:
+        raise TypeError(f"expected 4 numbers, got {len(values)}")
+    return float(values[0]), float(values[1]), float(values[2]), float(values[3])
+
+
 def load_robot(spec: str | Mapping[str, Any] | RobotModel, *, path: str = "robot") -> RobotModel:
     """Build a :class:`RobotModel` from a registry name, a YAML mapping or a model.
 
@@ -375,10 +389,8 @@ def load_robot(spec: str | Mapping[str, Any] | RobotModel, *, path: str = "robot
                 parsed[fname] = FootDescription(
                     frame=f["frame"],
                     parent=f.get("parent"),
-                    offset=tuple(float(x) for x in f.get("offset", (0, 0, 0))),
-                    rectangle=tuple(
-                        float(x) for x in f.get("rectangle", (-0.05, 0.1, -0.03, 0.03))
-                    ),
+                    offset=_floats3(f.get("offset", (0, 0, 0))),
+                    rectangle=_floats4(f.get("rectangle", (-0.05, 0.1, -0.03, 0.03))),
                 )
             except (KeyError, TypeError) as exc:
                 raise ConfigError(

@@ -37,8 +37,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ..constraints.contacts import Contacts
 from ..control.controller import Controller
 from ..errors import ConfigError, QPRetargetError
+from ..tasks.frame import FrameTask
 from ..trajectory import RobotTrajectory
 from ..yamlio import load_yaml
 from .metrics import rmse
@@ -96,7 +98,7 @@ def scripted_targets(
     controller.reset()
     base: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
     for name, task in controller.tasks.items():
-        if not getattr(task, "has_position", False):
+        if not (isinstance(task, FrameTask) and task.has_position):
             continue
         p, R = task.current_pose(controller.state)
         lname = (name + " " + str(getattr(task, "frame", ""))).lower()
@@ -261,7 +263,10 @@ def record_run(
     """
     controller.reset()
     dt = controller.dt if dt is None else float(dt)
-    pos_tasks = [n for n, t in controller.tasks.items() if getattr(t, "has_position", False)]
+    frame_tasks = {
+        n: t for n, t in controller.tasks.items() if isinstance(t, FrameTask) and t.has_position
+    }
+    pos_tasks = list(frame_tasks)
     qs, vs, ts, statuses, solve = (
         [controller.q.copy()],
         [np.zeros(controller.robot.nv)],
@@ -269,13 +274,10 @@ def record_run(
         ["ok"],
         [0.0],
     )
-    tgt = {n: [controller.tasks[n].position_target.copy()] for n in pos_tasks}
-    act = {n: [controller.tasks[n].current_pose(controller.state)[0].copy()] for n in pos_tasks}
+    tgt = {n: [t.position_target.copy()] for n, t in frame_tasks.items()}
+    act = {n: [t.current_pose(controller.state)[0].copy()] for n, t in frame_tasks.items()}
     taus: list[np.ndarray] = []
-    contact = next(
-        (c for c in controller.constraints if hasattr(c, "active_feet") and hasattr(c, "names")),
-        None,
-    )
+    contact = next((c for c in controller.constraints if isinstance(c, Contacts)), None)
     feet = list(contact.names) if contact is not None else []
 
     def active() -> list[bool]:
@@ -295,8 +297,7 @@ def record_run(
         if res.tau is not None:
             taus.append(np.array(res.tau))
         contacts.append(active())
-        for n in pos_tasks:
-            task = controller.tasks[n]
+        for n, task in frame_tasks.items():
             tgt[n].append(task.position_target.copy())
             act[n].append(task.current_pose(controller.state)[0].copy())
     tau = None
@@ -572,6 +573,8 @@ def _run_one(
         traj = motion.run(controller)
     wall = time.perf_counter() - t0
     first = 1 if motion.initial_sample else 0
+    if traj.solve_time is None or traj.status is None:  # both recorded by every run above
+        raise QPRetargetError(f"solver {name!r}: the run recorded no solve times or status")
     solve_ms = np.asarray(traj.solve_time[first:]) * 1e3
     status = np.asarray(traj.status[first:]).astype(str)
     viols = np.array([r[0] for r in records]) if records else np.zeros(0)

@@ -9,6 +9,7 @@ frames.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import overload
 
 import numpy as np
 
@@ -116,6 +117,18 @@ def forward_kinematics(
         positions[:, j] = positions[:, p] + np.einsum("tab,tb->ta", parent_r, local_t)
         orientations[:, j] = parent_r if local_r is None else parent_r @ local_r
     return positions, orientations
+
+
+@overload
+def change_up_axis(
+    positions: np.ndarray, orientations: np.ndarray, up_axis: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+@overload
+def change_up_axis(
+    positions: np.ndarray, orientations: None, up_axis: str
+) -> tuple[np.ndarray, None, np.ndarray]: ...
 
 
 def change_up_axis(

@@ -547,9 +547,9 @@ def read_asf_amc(
     positions, orientations, _ = change_up_axis(positions, orientations, up_axis)
     return HumanMotion(
         t=np.arange(num_frames) / rate,
-        names=names,
+        names=tuple(names),
         positions=positions,
-        parents=parents,
+        parents=tuple(parents),
         orientations=orientations,
         rate=rate,
         source=str(amc_path),

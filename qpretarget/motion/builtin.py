@@ -214,9 +214,9 @@ def builtin_motion(rate: float = 60.0, *, duration: float = DURATION) -> HumanMo
         parents.append(-1 if p is None else index[p])
     return HumanMotion(
         t=times,
-        names=names,
+        names=tuple(names),
         positions=positions,
-        parents=parents,
+        parents=tuple(parents),
         rate=float(rate),
         source="builtin:human_description (wave, reach across, squat, side step)",
         meta={"format": "builtin", "keypoint_map": "identity", "model": HUMAN_URDF},

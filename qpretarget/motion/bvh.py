@@ -440,9 +440,9 @@ def read_bvh(
     rate = rate_from_frame_time(frame_time)
     return HumanMotion(
         t=np.arange(num_frames) / rate,
-        names=[j.name for j in joints],
+        names=tuple(j.name for j in joints),
         positions=positions,
-        parents=parents,
+        parents=tuple(parents),
         orientations=orientations,
         rate=rate,
         source=str(path),

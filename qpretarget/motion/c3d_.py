@@ -136,9 +136,9 @@ def read_c3d(
     positions, _, _ = change_up_axis(positions, None, up_axis)
     motion = HumanMotion(
         t=np.arange(expected) / rate,
-        names=labels,
+        names=tuple(labels),
         positions=positions,
-        parents=[-1] * count,
+        parents=(-1,) * count,
         orientations=None,
         rate=rate,
         source=str(path),

@@ -284,7 +284,13 @@ class CardinalSpline:
 
     # --------------------------------------------------------------------------- shared math
 
-    def _tangent(self, t_prev: float, x_prev, t_next: float, x_next) -> np.ndarray:
+    def _tangent(
+        self,
+        t_prev: float | np.ndarray,
+        x_prev: np.ndarray,
+        t_next: float | np.ndarray,
+        x_next: np.ndarray,
+    ) -> np.ndarray:
         return 2.0 * self.tension * (x_next - x_prev) / (t_next - t_prev)
 
     def _out_times(self, t0: float, first: int, upto: float) -> np.ndarray:
@@ -364,7 +370,7 @@ class CardinalSpline:
     def reset(self) -> None:
         """Forget all samples; the next :meth:`push` starts a new signal."""
         self._t, self._x = [], []
-        self._t0: float | None = None
+        self._t0 = None
         self._count = 0
         self._next_out = 0
 

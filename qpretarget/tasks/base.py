@@ -123,8 +123,13 @@ class Task(abc.ABC):
 
     # ------------------------------------------------------------------ targets
     @abc.abstractmethod
-    def set_target(self, target: Any, *, tick: int | None = None) -> None:
-        """Validate, copy and store a target. Raise :class:`TargetError` on a bad shape/type."""
+    def set_target(self, target: Any, *, tick: int | None = None) -> bool:
+        """Validate, copy and store a target. Raise :class:`TargetError` on a bad shape/type.
+
+        Returns:
+            ``False`` when the target holds NaN/inf (missing data; the last target is kept and
+            the controller calls :meth:`mark_missing`), ``True`` otherwise.
+        """
 
     def mark_missing(self) -> None:
         """The target of this tick is missing (NaN): weight zero, then a smooth ramp back."""
@@ -164,7 +169,7 @@ class Task(abc.ABC):
         J = self.compute_jacobian(state)
         gain = self.gain
         k = 1.0 / dt if gain is None or gain * dt > 1.0 else gain
-        if self._Jbuf is not None:
+        if self._Jbuf is not None and self._vbuf is not None:  # set together (attach_buffers)
             np.copyto(self._Jbuf, J)
             J = self._Jbuf
             v_star = self._vbuf

@@ -106,7 +106,9 @@ def rpy_matrix(rpy: npt.ArrayLike) -> np.ndarray:
     )
 
 
-def _segments(points: np.ndarray, s: np.ndarray):  # noqa: ANN202
+def _segments(
+    points: np.ndarray, s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
     """Segment geometry of a polyline and the segment of every sample (shared by both chains)."""
     d = points[1:] - points[:-1]  # (M, 3)
     lengths = np.sqrt(np.einsum("mi,mi->m", d, d))  # (M,)

@@ -50,11 +50,13 @@ class PostureTask(Task):
             level=level, recovery_time=recovery_time,
         )  # fmt: skip
         self.default_weight = float(default_weight)
-        self.q_target: np.ndarray | None = None
+        self.q_target: np.ndarray | None = None  # set by bind
+        self._root_nv = 0  # velocity coordinates of the free-flyer, set by bind
 
     def bind(self, robot: RobotModel, *, path: str = "") -> None:
         self.dim = robot.nv - robot.root_nv
         super().bind(robot, path=path)
+        self._root_nv = robot.root_nv
         if self._joint_weights is not None:
             w = np.full(self.dim, self.default_weight)
             for jname, wj in self._joint_weights.items():
@@ -70,7 +72,7 @@ class PostureTask(Task):
 
     def set_target(self, target: Any, *, tick: int | None = None) -> bool:
         robot = self.robot
-        assert robot is not None
+        assert robot is not None and self.q_target is not None, "bind() before set_target()"
         q = self.q_target.copy()
         if isinstance(target, Mapping):
             for jname, value in target.items():
@@ -103,7 +105,7 @@ class PostureTask(Task):
         return True
 
     def compute_error(self, state: RobotState) -> np.ndarray:
-        return pin.difference(state.model, state.q, self.q_target)[self.robot.root_nv :]
+        return pin.difference(state.model, state.q, self.q_target)[self._root_nv :]
 
     def compute_jacobian(self, state: RobotState) -> np.ndarray:
         return self._J
