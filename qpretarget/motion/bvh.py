@@ -19,7 +19,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Literal, NoReturn
 
 import numpy as np
 
@@ -38,14 +38,11 @@ LENGTH_UNITS: dict[str, float] = {
 #: Rest-pose size the ``"auto"`` rule aims at: largest extent of the skeleton in [m].
 TYPICAL_HUMAN_EXTENT = 1.7
 
-_CHANNELS = {
-    "xposition": ("position", 0),
-    "yposition": ("position", 1),
-    "zposition": ("position", 2),
-    "xrotation": ("rotation", "x"),
-    "yrotation": ("rotation", "y"),
-    "zrotation": ("rotation", "z"),
-}
+#: Position channels (lower case) -> component of the joint translation they set.
+_POSITION_CHANNELS = {"xposition": 0, "yposition": 1, "zposition": 2}
+#: Rotation channels (lower case) -> axis of the elementary rotation.
+_ROTATION_CHANNELS = {"xrotation": "x", "yrotation": "y", "zrotation": "z"}
+_CHANNELS = {**_POSITION_CHANNELS, **_ROTATION_CHANNELS}
 
 
 @dataclass
@@ -216,6 +213,22 @@ _FRAME_TIME = re.compile(r"^\s*Frame\s+Time\s*:\s*(\S+)\s*$", re.IGNORECASE)
 def _parse_motion(
     path: Path, lines: list[str], motion_line: int, num_channels: int
 ) -> tuple[np.ndarray, float]:
+    """Channel values ``(frames, num_channels)`` and the frame time [s] of the MOTION section."""
+    num_frames, frame_time = _motion_header(path, lines, motion_line)
+    first_row_line = motion_line + 3
+    rows = _data_rows(path, lines, motion_line, num_frames, num_channels)
+    try:
+        values = np.array(" ".join(rows).split(), dtype=float)
+    except ValueError:
+        _raise_bad_row(path, lines, first_row_line, rows)
+    if not np.all(np.isfinite(values)):
+        _raise_bad_row(path, lines, first_row_line, rows)
+    return values.reshape(num_frames, num_channels), frame_time
+
+
+def _motion_header(path: Path, lines: list[str], motion_line: int) -> tuple[int, float]:
+    """``Frames:`` and ``Frame Time:`` (the two lines after ``MOTION``), checked."""
+
     def header(offset: int, pattern: re.Pattern[str], what: str) -> str:
         number = motion_line + offset
         text = lines[number - 1] if number <= len(lines) else "<end of file>"
@@ -246,9 +259,15 @@ def _parse_motion(
         raise MotionFormatError(
             path, f"Frames must be at least 1, found {num_frames}", line=motion_line + 1
         )
-    first_row_line = motion_line + 3
+    return num_frames, frame_time
+
+
+def _data_rows(
+    path: Path, lines: list[str], motion_line: int, num_frames: int, num_channels: int
+) -> list[str]:
+    """The ``num_frames`` non-blank data lines, each with ``num_channels`` words."""
     rows: list[str] = []
-    for number in range(first_row_line, len(lines) + 1):
+    for number in range(motion_line + 3, len(lines) + 1):
         text = lines[number - 1]
         count = len(text.split())
         if count == 0:
@@ -276,26 +295,25 @@ def _parse_motion(
             f"only {len(rows)} data rows before the end of the file",
             line=len(lines),
         )
-    try:
-        values = np.array(" ".join(rows).split(), dtype=float)
-    except ValueError:
-        values = None
-    if values is None or not np.all(np.isfinite(values)):
-        for i, text in enumerate(rows):
-            try:
-                ok = np.all(np.isfinite(np.array(text.split(), dtype=float)))
-            except ValueError:
-                ok = False
-            if not ok:
-                number = _row_line(lines, first_row_line, i)
-                raise MotionFormatError(
-                    path,
-                    "expected finite numbers, found "
-                    f"{[w for w in text.split() if not _is_finite_number(w)][:3]}",
-                    line=number,
-                    frame=i + 1,
-                )
-    return values.reshape(num_frames, num_channels), frame_time
+    return rows
+
+
+def _raise_bad_row(path: Path, lines: list[str], first_row_line: int, rows: list[str]) -> NoReturn:
+    """Raise for the first data row holding a word that is not a finite number."""
+    for i, text in enumerate(rows):
+        try:
+            ok = bool(np.all(np.isfinite(np.array(text.split(), dtype=float))))
+        except ValueError:
+            ok = False
+        if not ok:
+            raise MotionFormatError(
+                path,
+                "expected finite numbers, found "
+                f"{[w for w in text.split() if not _is_finite_number(w)][:3]}",
+                line=_row_line(lines, first_row_line, i),
+                frame=i + 1,
+            )
+    raise AssertionError("a row failed to parse but every word is a finite number")
 
 
 def _is_finite_number(word: str) -> bool:
@@ -388,13 +406,7 @@ def read_bvh(
         ValueError: Bad ``length_scale`` or ``up_axis``, or ``"auto"`` found no human-sized unit.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise MotionFormatError(
-            path, f"not a text file ({exc.reason} at byte {exc.start})"
-        ) from None
-    lines = text.splitlines()
+    lines = _read_lines(path)
     joints, motion_line = _parse_hierarchy(path, lines)
     num_channels = sum(len(j.channels) for j in joints)
     values, frame_time = _parse_motion(path, lines, motion_line, num_channels)
@@ -404,36 +416,8 @@ def read_bvh(
     offsets = np.array([j.offset for j in joints])
     rest_positions, _ = forward_kinematics(parents, list(offsets), [None] * len(joints))
     extent = float(np.ptp(rest_positions[0], axis=0).max())
-    if length_scale is None or length_scale == "auto":
-        scale, unit = guess_length_scale(extent)
-        unit = f"{unit} (auto: rest-pose extent {extent:.4g} file units)"
-    else:
-        scale = float(length_scale)
-        unit = "explicit"
-        if not (math.isfinite(scale) and scale > 0):
-            raise ValueError(
-                f"length_scale must be a positive number or 'auto', got {length_scale!r}"
-            )
-
-    translations: list[np.ndarray] = []
-    rotations: list[np.ndarray | None] = []
-    for joint in joints:
-        columns = values[:, joint.first_channel : joint.first_channel + len(joint.channels)]
-        translation: np.ndarray = joint.offset * scale
-        axes, angle_columns = [], []
-        for k, channel in enumerate(joint.channels):
-            kind, which = _CHANNELS[channel.lower()]
-            if kind == "position":
-                if translation.ndim == 1:
-                    translation = np.tile(translation, (num_frames, 1))
-                translation[:, which] = columns[:, k] * scale
-            else:
-                axes.append(which)
-                angle_columns.append(k)
-        translations.append(translation)
-        rotations.append(
-            euler_product(np.deg2rad(columns[:, angle_columns]), axes) if axes else None
-        )
+    scale, unit = _length_scale(length_scale, extent)
+    translations, rotations = _joint_motions(joints, values, scale)
     positions, orientations = forward_kinematics(parents, translations, rotations, num_frames)
     positions, orientations, _ = change_up_axis(positions, orientations, up_axis)
 
@@ -457,3 +441,57 @@ def read_bvh(
             "channels": {j.name: list(j.channels) for j in joints if j.channels},
         },
     )
+
+
+def _read_lines(path: Path) -> list[str]:
+    """Lines of a text file; a clear error for a binary one."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise MotionFormatError(
+            path, f"not a text file ({exc.reason} at byte {exc.start})"
+        ) from None
+    return text.splitlines()
+
+
+def _length_scale(length_scale: float | str | None, extent: float) -> tuple[float, str]:
+    """``(metres per file unit, how it was chosen)`` for ``read_bvh``'s ``length_scale``."""
+    if length_scale is None or length_scale == "auto":
+        scale, unit = guess_length_scale(extent)
+        return scale, f"{unit} (auto: rest-pose extent {extent:.4g} file units)"
+    scale = float(length_scale)
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"length_scale must be a positive number or 'auto', got {length_scale!r}")
+    return scale, "explicit"
+
+
+def _joint_motions(
+    joints: list[_Joint], values: np.ndarray, scale: float
+) -> tuple[list[np.ndarray], list[np.ndarray | None]]:
+    """Per joint: translation in its parent [m] (``(3,)`` or ``(T, 3)``) and rotation stack.
+
+    Position channels replace the matching ``OFFSET`` component; rotation channels compose left
+    to right (``Zrotation Yrotation Xrotation`` is :math:`R_z R_y R_x`), angles in degrees.
+    """
+    num_frames = values.shape[0]
+    translations: list[np.ndarray] = []
+    rotations: list[np.ndarray | None] = []
+    for joint in joints:
+        columns = values[:, joint.first_channel : joint.first_channel + len(joint.channels)]
+        translation: np.ndarray = joint.offset * scale
+        axes: list[str] = []
+        angle_columns: list[int] = []
+        for k, channel in enumerate(joint.channels):
+            component = _POSITION_CHANNELS.get(channel.lower())
+            if component is not None:
+                if translation.ndim == 1:
+                    translation = np.tile(translation, (num_frames, 1))
+                translation[:, component] = columns[:, k] * scale
+            else:
+                axes.append(_ROTATION_CHANNELS[channel.lower()])
+                angle_columns.append(k)
+        translations.append(translation)
+        rotations.append(
+            euler_product(np.deg2rad(columns[:, angle_columns]), axes) if axes else None
+        )
+    return translations, rotations
