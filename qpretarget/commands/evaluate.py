@@ -69,6 +69,7 @@ def _pairs(values: list[str] | None) -> list[tuple[str, str]] | None:
 
 def run(args: argparse.Namespace) -> int:
     """Compute the metrics, write metrics.json and the figures, print a summary."""
+    from ..analysis.human_metrics import human_metrics_or_reason
     from ..analysis.metrics import compute_series, dumps, summarize
     from ..trajectory import RobotTrajectory
 
@@ -77,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
     traj = RobotTrajectory.load(args.run)
     series = compute_series(traj, pairs=pairs, safety_distance=args.safety_distance)
     metrics = summarize(series, per_frame=not args.no_per_frame)
+    human, reason = human_metrics_or_reason(traj)
+    metrics["human"] = human if human is not None else {"unavailable": reason}
     before = None
     if args.before:
         btraj = RobotTrajectory.load(args.before)
@@ -150,4 +153,11 @@ def _print_summary(m: dict) -> None:
             f"frame ({b['joint_limits']['total_violations']} joint-limit, "
             f"{b['self_collision']['total_violations']} self-collision)"
         )
+    human = m.get("human") or {}
+    if "unavailable" in human:
+        lines.append(f"vs the person    not measured: {human['unavailable']}")
+    elif human:
+        from ..analysis.human_metrics import format_human_metrics
+
+        lines += format_human_metrics(human)
     print("\n".join(lines))

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ..analysis.human_metrics import format_human_metrics, human_metrics_or_reason
 from ..control.controller import Controller
 from ..trajectory import RobotTrajectory
 
@@ -27,7 +28,9 @@ def summarize_run(
         A JSON-serializable dict: ``duration`` [s], ``ticks``, ``ticks_per_second``,
         ``rmse_mm`` (position tasks), ``joint_limit_violations`` (samples x joints outside the
         limits by more than 1e-6 rad), ``feet_drift_mm`` (largest displacement of a sole during
-        one of its contact intervals), ``status`` counts, ``phases`` (support-state intervals).
+        one of its contact intervals), ``status`` counts, ``phases`` (support-state intervals),
+        ``human`` (:func:`~qpretarget.analysis.human_metrics.human_metrics`, the same numbers
+        as ``qpretarget evaluate``; ``human_unavailable`` says why when the run has no person).
     """
     robot = controller.robot
     q = np.asarray(traj.q, float)
@@ -53,8 +56,8 @@ def summarize_run(
     viol = (qj < lo - 1e-6) | (qj > hi + 1e-6)
     out["joint_limit_violations"] = int(viol.sum())
     if viol.any():
-        worst = np.argmax(np.max(np.maximum(lo - qj, qj - hi), axis=0))
-        out["worst_joint"] = robot.joint_names[int(worst)]
+        worst_joint = np.argmax(np.max(np.maximum(lo - qj, qj - hi), axis=0))
+        out["worst_joint"] = robot.joint_names[int(worst_joint)]
     drift = {}
     if traj.contacts is not None and np.asarray(traj.contacts).size:
         model, data = robot.model, robot.model.createData()
@@ -87,6 +90,11 @@ def summarize_run(
     if support is not None and len(support) and str(support[0]):
         changes = [0] + [k for k in range(1, T) if support[k] != support[k - 1]]
         out["support_states"] = [(float(traj.t[k]), str(support[k])) for k in changes]
+    human, reason = human_metrics_or_reason(traj, robot)
+    if human is not None:
+        out["human"] = human
+    else:
+        out["human_unavailable"] = reason
     if traj.solve_time is not None:
         st = np.asarray(traj.solve_time, float)
         out["solve_time_ms"] = {
@@ -124,4 +132,6 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
     if phases:
         steps = sum(1 for _, s in phases if s.startswith("lower_"))
         lines.append(f"support      {len(phases)} state changes, {steps} step(s) placed")
+    if "human" in summary:
+        lines += format_human_metrics(summary["human"])
     return "\n".join(lines)

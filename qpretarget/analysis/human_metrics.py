@@ -1,0 +1,464 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Human-referenced metrics of a run: does the robot do what the person did?
+
+One implementation, used by the run summary of ``qpretarget retarget``, by ``qpretarget evaluate``
+(``metrics.json`` key ``human``) and by the tests; the definitions are in ``docs/metrics.md``,
+section "Human-referenced metrics".
+
+**The scaled human.** The person's raw key-points (``human/<key-point>`` of the run file),
+interpolated at the robot's samples, scaled by the leg-length ratio :math:`s = L_r / L_h`
+(hip-knee plus knee-ankle lengths: the robot's at its reference posture, the person's median
+over the first 10 samples) and aligned at the first sample on the root position and yaw:
+
+.. math::
+
+    \tilde p(t) = R_z(\psi_r(0) - \psi_h(0))\, s\, (p(t) - w_h(0)) + w_r(0),
+
+with :math:`w_h` the person's waist key-point, :math:`w_r` the robot's pelvis frame and
+:math:`\psi` the headings (robot: the pelvis frame's x axis; person: the normal of the hip line).
+
+**Measures** (``T`` samples, ``dt`` the sample period):
+
+* *root travel ratio*: horizontal path length of the robot pelvis over the scaled human's, both
+  sampled every 0.1 s (pelvis sway at the control rate does not count as travel);
+* *heading error*: :math:`(\psi_r(t) - \psi_r(0)) - (\psi_h(t) - \psi_h(0))`, both unwrapped,
+  in degrees, largest magnitude and final value;
+* *foot height*: robot, sole frame height above the soles' first-sample height; person, the
+  lowest of its foot key-points (ankle, toe, heel) above that point type's lowest height in the
+  clip (either foot), times :math:`s`;
+* *steps*: foot lifts, maximal intervals with a foot higher than 3 cm (gaps under 0.1 s merged),
+  counted per foot, robot and person;
+* *swing-height ratio*: for each human lift higher than 5 cm, the robot foot's highest point
+  within the lift (widened by 0.2 s each side) over the person's;
+* *lift agreement*: share of the samples with a human foot higher than 3 cm in which the robot's
+  same foot is off the ground (higher than 5 mm);
+* *flight*: intervals with both feet higher than 3 cm (person) or 5 mm (robot), and the share of
+  the person's flight time in which the robot is in flight too;
+* *ankle displacement error*: each ankle's displacement from its first-sample position, robot
+  minus scaled human, in robot leg lengths, RMS over samples and both ankles (stance width and
+  the robot's different foot placement at the start drop out);
+* *pelvis height error*: robot pelvis height minus the scaled human's (equal at the first
+  sample), largest magnitude and RMS;
+* *pelvis tilt error*: change of the pelvis tilt (angle of its z axis from the vertical) since
+  the first sample, robot minus person (the person's pelvis frame from the hips and the
+  waist-neck direction), largest magnitude in degrees;
+* *stance slip*: for each stance of a robot foot (touch-down to lift-off: its ``contacts`` column,
+  else the sole lower than 5 mm), the largest distance of the sole from where it touched down;
+  the largest over stances [mm];
+* *sole below ground*: the lowest sole height under the first-sample height [mm];
+* *held ticks*: samples with status ``held``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from ..robot import RobotModel, load_robot
+from ..trajectory import RobotTrajectory
+
+SIDES = ("left", "right")
+#: A foot higher than this is lifted (a step) [m].
+LIFT_HEIGHT = 0.03
+#: A robot foot higher than this is off the ground [m].
+OFF_GROUND = 0.005
+#: Lifts lower than this are left out of the swing-height ratio [m].
+SWING_MIN = 0.05
+#: Lifts separated by less than this are one lift [s].
+MERGE_GAP = 0.1
+#: Sample period of the path lengths [s].
+PATH_STEP = 0.1
+#: Window widening of the swing-height comparison [s].
+SWING_WINDOW = 0.2
+
+
+class HumanMetricsError(ValueError):
+    """The run cannot be compared with the person (no human key-points, no legs)."""
+
+
+def _yaw(x: np.ndarray) -> np.ndarray:
+    return np.arctan2(x[..., 1], x[..., 0])
+
+
+def intervals(mask: np.ndarray, t: np.ndarray, *, merge: float = 0.0) -> list[tuple[int, int]]:
+    """Maximal runs ``[i, j)`` of ``True`` in ``mask``; runs closer than ``merge`` [s] joined."""
+    out: list[tuple[int, int]] = []
+    T = len(mask)
+    k = 0
+    while k < T:
+        if mask[k]:
+            j = k
+            while j < T and mask[j]:
+                j += 1
+            if out and merge > 0 and t[k] - t[out[-1][1] - 1] < merge:
+                out[-1] = (out[-1][0], j)
+            else:
+                out.append((k, j))
+            k = j
+        else:
+            k += 1
+    return out
+
+
+def _interp(t: np.ndarray, tp: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Linear interpolation of ``(N, 3)`` samples at times ``t`` (NaN samples skipped)."""
+    out = np.full((len(t), x.shape[1]), np.nan)
+    for c in range(x.shape[1]):
+        ok = np.isfinite(x[:, c])
+        if ok.sum() >= 2:
+            out[:, c] = np.interp(t, tp[ok], x[ok, c])
+    return out
+
+
+def _leg_length(points: Mapping[str, np.ndarray], side: str) -> float | None:
+    try:
+        h, k, a = (points[f"{side}_{p}"] for p in ("hip", "knee", "ankle"))
+    except KeyError:
+        return None
+    n = float(np.linalg.norm(k - h) + np.linalg.norm(a - k))
+    return n if math.isfinite(n) and n > 0 else None
+
+
+def robot_leg_length(robot: RobotModel) -> float:
+    """Mean hip-knee + knee-ankle length of the robot's legs at its reference posture [m].
+
+    Hips from the ``left_hip``/``right_hip`` key-frames, else the origin of the knee joint's
+    parent joint (the hip pitch joint of Talos' leg chain).
+
+    Raises:
+        HumanMetricsError: The robot has no knee or ankle key-frames.
+    """
+    model, data = robot.model, robot.model.createData()
+    pin.framesForwardKinematics(model, data, robot.q_reference)
+    kf = robot.keyframes
+    lengths = []
+    for side in SIDES:
+        if f"{side}_knee" not in kf or f"{side}_ankle" not in kf:
+            continue
+        knee_f = robot.frame_id(kf[f"{side}_knee"])
+        knee = data.oMf[knee_f].translation
+        ankle = data.oMf[robot.frame_id(kf[f"{side}_ankle"])].translation
+        if f"{side}_hip" in kf:
+            hip = data.oMf[robot.frame_id(kf[f"{side}_hip"])].translation
+        else:
+            parent = model.parents[model.frames[knee_f].parentJoint]
+            hip = data.oMi[parent].translation
+        lengths.append(float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee)))
+    if not lengths:
+        raise HumanMetricsError(
+            f"robot {robot.name!r} has no knee and ankle key-frames: no leg length to scale the "
+            "person by (add them to its registry entry or robot spec)."
+        )
+    return float(np.mean(lengths))
+
+
+class _RobotSeries:
+    """Pelvis, ankles and soles of the robot at every sample (forward kinematics)."""
+
+    def __init__(self, traj: RobotTrajectory, robot: RobotModel) -> None:
+        model, data = robot.model, robot.model.createData()
+        kf = robot.keyframes
+        pelvis = robot.frame_id(kf.get("pelvis", model.frames[2].name))
+        ankles = {s: robot.frame_id(kf[f"{s}_ankle"]) for s in SIDES if f"{s}_ankle" in kf}
+        feet = {s: [f for f in robot.feet if s in f.lower()] for s in SIDES}
+        soles = {s: robot.frame_id(robot.feet[v[0]].frame) for s, v in feet.items() if len(v) == 1}
+        q = np.asarray(traj.q, float)
+        T = len(q)
+        self.pelvis = np.empty((T, 3))
+        self.pelvis_R = np.empty((T, 3, 3))
+        self.ankle = {s: np.empty((T, 3)) for s in ankles}
+        self.sole = {s: np.empty((T, 3)) for s in soles}
+        for k in range(T):
+            pin.framesForwardKinematics(model, data, q[k])
+            M = data.oMf[pelvis]
+            self.pelvis[k] = M.translation
+            self.pelvis_R[k] = M.rotation
+            for s, fid in ankles.items():
+                self.ankle[s][k] = data.oMf[fid].translation
+            for s, fid in soles.items():
+                self.sole[s][k] = data.oMf[fid].translation
+        self.foot_columns = {
+            s: traj.foot_names.index(v[0])
+            for s, v in feet.items()
+            if len(v) == 1 and v[0] in traj.foot_names
+        }
+
+
+def _path(xy: np.ndarray, t: np.ndarray) -> float:
+    grid = np.append(np.arange(t[0], t[-1] - 1e-9, PATH_STEP), t[-1])
+    pts = np.stack([np.interp(grid, t, xy[:, 0]), np.interp(grid, t, xy[:, 1])], axis=1)
+    return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+
+
+def _tilt(R: np.ndarray) -> np.ndarray:
+    return np.degrees(np.arccos(np.clip(R[..., 2, 2], -1.0, 1.0)))
+
+
+def _human_frame(kp: Mapping[str, np.ndarray]) -> np.ndarray | None:
+    """Person's pelvis frames ``(T, 3, 3)``: y along the hips, z towards the neck."""
+    if not all(k in kp for k in ("left_hip", "right_hip", "waist", "neck")):
+        return None
+    y = kp["left_hip"] - kp["right_hip"]
+    up = kp["neck"] - kp["waist"]
+    x = np.cross(y, up)
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    z = up / np.linalg.norm(up, axis=1, keepdims=True)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=2)
+
+
+def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dict[str, Any]:
+    """The human-referenced metrics of a run (see the module docstring).
+
+    Args:
+        traj: A run with the person's key-points (``human/<key-point>``: any run written by
+            ``qpretarget retarget``).
+        robot: Its robot model (default: loaded from ``traj.robot``).
+
+    Returns:
+        A JSON-serializable dict (lengths in m unless the key says mm, angles in degrees).
+
+    Raises:
+        HumanMetricsError: The run has no human key-points, or they have no waist, hips and
+            legs, or the robot has no knee and ankle key-frames.
+    """
+    if robot is None:
+        robot = load_robot(traj.robot)
+    human = traj.human or {}
+    if "t" not in human or "waist" not in human:
+        raise HumanMetricsError(
+            "the run has no human key-points (human/t, human/waist): it was not written by "
+            "qpretarget retarget, or with an old version; retarget the clip again."
+        )
+    t = np.asarray(traj.t, float)
+    T = len(t)
+    if T < 2:
+        raise HumanMetricsError(f"the run has {T} sample(s); the metrics need at least 2.")
+    th = np.asarray(human["t"], float)
+    kp = {
+        k: _interp(t, th, np.asarray(v, float).reshape(len(th), 3))
+        for k, v in human.items()
+        if k != "t" and np.asarray(v).size == 3 * len(th)
+    }
+    for k in ("left_hip", "right_hip"):
+        if k not in kp:
+            raise HumanMetricsError(f"the run's human key-points have no {k}: no heading.")
+    legs_h = [
+        x
+        for k in range(min(10, T))
+        for x in (_leg_length({n: v[k] for n, v in kp.items()}, side) for side in SIDES)
+        if x is not None
+    ]
+    if not legs_h:
+        raise HumanMetricsError("the run's human key-points have no hip, knee and ankle.")
+    L_r = robot_leg_length(robot)
+    s = L_r / float(np.median(legs_h))
+    rs = _RobotSeries(traj, robot)
+
+    # Alignment at the first sample.
+    psi_h = np.unwrap(_yaw(np.cross(kp["left_hip"] - kp["right_hip"], [0.0, 0.0, 1.0])))
+    psi_r = np.unwrap(_yaw(rs.pelvis_R[:, :, 0]))
+    Rz = np.array(
+        [
+            [math.cos(psi_r[0] - psi_h[0]), -math.sin(psi_r[0] - psi_h[0]), 0.0],
+            [math.sin(psi_r[0] - psi_h[0]), math.cos(psi_r[0] - psi_h[0]), 0.0],
+            [0.0, 0.0, 1.0],
+        ]
+    )
+    w0 = kp["waist"][0]
+
+    def scaled(p: np.ndarray) -> np.ndarray:
+        return (s * (p - w0)) @ Rz.T + rs.pelvis[0]
+
+    out: dict[str, Any] = {"leg_length_ratio": s, "robot_leg_length_m": L_r}
+    waist = scaled(kp["waist"])
+    human_path = _path(waist[:, :2], t)
+    robot_path = _path(rs.pelvis[:, :2], t)
+    out["root_travel"] = {
+        "robot_m": robot_path,
+        "human_m": human_path,
+        "ratio": robot_path / human_path if human_path > 1e-9 else None,
+        "final_offset_m": float(np.linalg.norm(rs.pelvis[-1, :2] - waist[-1, :2])),
+    }
+    dpsi = np.degrees((psi_r - psi_r[0]) - (psi_h - psi_h[0]))
+    out["heading_error_deg"] = {
+        "max": float(np.nanmax(np.abs(dpsi))),
+        "final": float(dpsi[-1]),
+        "human_turn": float(np.degrees(psi_h[-1] - psi_h[0])),
+    }
+    dz = rs.pelvis[:, 2] - waist[:, 2]
+    out["pelvis_height_error_m"] = {
+        "max": float(np.nanmax(np.abs(dz))),
+        "rms": float(np.sqrt(np.nanmean(dz**2))),
+    }
+    Rh = _human_frame(kp)
+    if Rh is not None:
+        tilt_h, tilt_r = _tilt(Rh), _tilt(rs.pelvis_R)
+        dtilt = (tilt_r - tilt_r[0]) - (tilt_h - tilt_h[0])
+        out["pelvis_tilt_error_deg"] = {"max": float(np.nanmax(np.abs(dtilt)))}
+
+    # Feet.
+    h_r: dict[str, np.ndarray] = {}
+    h_h: dict[str, np.ndarray] = {}
+    if rs.sole:
+        ground = float(np.mean([rs.sole[x][0, 2] for x in rs.sole]))
+        h_r = {x: rs.sole[x][:, 2] - ground for x in rs.sole}
+        out["sole_below_ground_mm"] = max(0.0, -min(float(v.min()) for v in h_r.values())) * 1e3
+    types = [p for p in ("ankle", "toe", "heel") if all(f"{x}_{p}" in kp for x in SIDES)]
+    if types and rs.sole:
+        gnd = {p: min(np.nanmin(kp[f"{x}_{p}"][:, 2]) for x in SIDES) for p in types}
+        for x in SIDES:
+            hs = np.stack([kp[f"{x}_{p}"][:, 2] - gnd[p] for p in types], axis=1)
+            h_h[x] = s * np.nanmin(hs, axis=1)
+    if h_r and h_h:
+        out.update(_feet_metrics(t, h_r, h_h, traj, rs))
+    # Ankle displacement error.
+    errs = []
+    for x in SIDES:
+        a = f"{x}_ankle"
+        if a in kp and x in rs.ankle:
+            d_h = (s * (kp[a] - kp[a][0])) @ Rz.T
+            d_r = rs.ankle[x] - rs.ankle[x][0]
+            errs.append(np.linalg.norm(d_r - d_h, axis=1) / L_r)
+    if errs:
+        e = np.concatenate(errs)
+        out["ankle_displacement_error_legs"] = {
+            "rms": float(np.sqrt(np.nanmean(e**2))),
+            "max": float(np.nanmax(e)),
+        }
+    status = np.asarray(traj.status, dtype=str) if traj.status is not None else np.array([])
+    out["held_ticks"] = int(np.sum(status == "held"))
+    phase = traj.extra.get("human_phase") if traj.extra else None
+    if phase is not None and len(phase) > 1:
+        switches = int(np.sum(np.asarray(phase[1:]) != np.asarray(phase[:-1])))
+        out["phase_switches_per_s"] = switches / max(float(t[-1] - t[0]), 1e-9)
+    return out
+
+
+def _feet_metrics(
+    t: np.ndarray,
+    h_r: Mapping[str, np.ndarray],
+    h_h: Mapping[str, np.ndarray],
+    traj: RobotTrajectory,
+    rs: _RobotSeries,
+) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    steps: dict[str, dict[str, int]] = {}
+    ratios: list[float] = []
+    agree_num = agree_den = 0
+    for x in SIDES:
+        if x not in h_r or x not in h_h:
+            continue
+        lifts_h = intervals(h_h[x] > LIFT_HEIGHT, t, merge=MERGE_GAP)
+        lifts_r = intervals(h_r[x] > LIFT_HEIGHT, t, merge=MERGE_GAP)
+        steps[x] = {"robot": len(lifts_r), "human": len(lifts_h)}
+        for i, j in lifts_h:
+            peak = float(np.max(h_h[x][i:j]))
+            if peak < SWING_MIN:
+                continue
+            lo = int(np.searchsorted(t, t[i] - SWING_WINDOW))
+            hi = int(np.searchsorted(t, t[j - 1] + SWING_WINDOW, side="right"))
+            ratios.append(float(np.max(h_r[x][lo:hi])) / peak)
+        lifted = h_h[x] > LIFT_HEIGHT
+        agree_den += int(lifted.sum())
+        agree_num += int(np.sum(lifted & (h_r[x] > OFF_GROUND)))
+    out["steps"] = steps
+    out["steps_total"] = {
+        "robot": sum(v["robot"] for v in steps.values()),
+        "human": sum(v["human"] for v in steps.values()),
+    }
+    out["swing_height_ratio"] = {
+        "min": min(ratios) if ratios else None,
+        "median": float(np.median(ratios)) if ratios else None,
+        "lifts": len(ratios),
+    }
+    out["lift_agreement"] = agree_num / agree_den if agree_den else None
+    fly_h = np.logical_and.reduce([h_h[x] > LIFT_HEIGHT for x in SIDES if x in h_h])
+    fly_r = np.logical_and.reduce([h_r[x] > OFF_GROUND for x in SIDES if x in h_r])
+    out["flight"] = {
+        "human": len(intervals(fly_h, t, merge=MERGE_GAP)),
+        "robot": len(intervals(fly_r, t, merge=MERGE_GAP)),
+        "shared_share": float(np.sum(fly_h & fly_r) / fly_h.sum()) if fly_h.any() else None,
+    }
+    # Stance slip.
+    slip: dict[str, float] = {}
+    stances = 0
+    contacts = None if traj.contacts is None else np.asarray(traj.contacts, bool)
+    for x, sole in rs.sole.items():
+        col = rs.foot_columns.get(x)
+        if contacts is not None and contacts.size and col is not None:
+            on = contacts[:, col]
+        else:
+            on = h_r[x] < OFF_GROUND
+        worst = 0.0
+        for i, j in intervals(on, t):
+            stances += 1
+            worst = max(worst, float(np.max(np.linalg.norm(sole[i:j] - sole[i], axis=1))))
+        slip[x] = worst * 1e3
+    out["stance_slip_mm"] = {"max": max(slip.values()) if slip else 0.0, **slip}
+    out["stances"] = stances
+    return out
+
+
+def format_human_metrics(m: Mapping[str, Any]) -> list[str]:
+    """Readable lines of :func:`human_metrics`'s dict (run summary, ``evaluate``)."""
+
+    def f(x: float | None, spec: str = ".2f") -> str:
+        return "-" if x is None else format(x, spec)
+
+    rt, hd, ph = m["root_travel"], m["heading_error_deg"], m["pelvis_height_error_m"]
+    lines = [
+        f"vs the person (scaled by the leg ratio {m['leg_length_ratio']:.3f}, aligned at t0):",
+        f"  root travel     robot {rt['robot_m']:.2f} m / human {rt['human_m']:.2f} m "
+        f"(ratio {f(rt['ratio'])})",
+        f"  heading error   max {hd['max']:.1f} deg, final {hd['final']:.1f} deg "
+        f"(human turned {hd['human_turn']:.0f} deg)",
+        f"  pelvis height   error max {ph['max'] * 100:.1f} cm, RMS {ph['rms'] * 100:.1f} cm",
+    ]
+    if "pelvis_tilt_error_deg" in m:
+        lines.append(f"  pelvis tilt     error max {m['pelvis_tilt_error_deg']['max']:.1f} deg")
+    if "steps" in m:
+        st = m["steps_total"]
+        sw = m["swing_height_ratio"]
+        fl = m["flight"]
+        lines += [
+            f"  steps (>3 cm)   robot {st['robot']}, human {st['human']}"
+            + "".join(f"; {k} {v['robot']}/{v['human']}" for k, v in m["steps"].items()),
+            f"  swing height    ratio min {f(sw['min'])}, median {f(sw['median'])} "
+            f"over {sw['lifts']} lift(s) > 5 cm; lift agreement {f(m['lift_agreement'])}",
+            f"  flight          robot {fl['robot']}, human {fl['human']} interval(s)",
+            f"  stance slip     max {m['stance_slip_mm']['max']:.3f} mm over "
+            f"{m['stances']} stance(s); sole below ground {m['sole_below_ground_mm']:.2f} mm",
+        ]
+    if "ankle_displacement_error_legs" in m:
+        a = m["ankle_displacement_error_legs"]
+        lines.append(f"  ankle displ.    error RMS {a['rms']:.3f} leg lengths, max {a['max']:.3f}")
+    extra = f"  held ticks      {m['held_ticks']}"
+    if "phase_switches_per_s" in m:
+        extra += f"; human support phase switches {m['phase_switches_per_s']:.2f}/s"
+    lines.append(extra)
+    return lines
+
+
+def human_metrics_or_reason(
+    traj: RobotTrajectory, robot: RobotModel | None = None
+) -> tuple[dict[str, Any] | None, str | None]:
+    """:func:`human_metrics`, or ``(None, reason)`` when the run cannot be compared."""
+    try:
+        return human_metrics(traj, robot), None
+    except HumanMetricsError as exc:
+        return None, str(exc)
+
+
+__all__: Sequence[str] = [
+    "HumanMetricsError",
+    "format_human_metrics",
+    "human_metrics",
+    "human_metrics_or_reason",
+    "intervals",
+    "robot_leg_length",
+]

@@ -1,0 +1,109 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Human-referenced metrics (qpretarget.analysis.human_metrics): definitions on known motions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from qpretarget.analysis.human_metrics import (
+    HumanMetricsError,
+    human_metrics,
+    intervals,
+    robot_leg_length,
+)
+from qpretarget.robot import load_robot
+from qpretarget.trajectory import RobotTrajectory
+
+
+@pytest.fixture(scope="module")
+def g1():
+    return load_robot("g1")
+
+
+def _run(robot, *, turn_robot: float, turn_human: float, lift: float) -> RobotTrajectory:
+    """A synthetic 2 s run: the robot's root walks 1 m along x and turns by ``turn_robot``.
+
+    The "person" is the robot's own key-frames (so the leg-length ratio is exactly 1), its root
+    turning by ``turn_human``; the robot's left sole rises by ``lift`` between 0.5 and 1.0 s while
+    the person's left ankle does not move up.
+    """
+    t = np.arange(0.0, 2.0, 0.01)
+    q0 = robot.q_reference.copy()
+    model, data = robot.model, robot.model.createData()
+    q = np.tile(q0, (len(t), 1))
+    human: dict[str, list[np.ndarray]] = {}
+    kf = robot.keyframes
+    for k, tk in enumerate(t):
+        for turn, who in ((turn_robot, "robot"), (turn_human, "human")):
+            qk = q0.copy()
+            qk[0] += 0.5 * tk
+            R = (
+                pin.utils.rpyToMatrix(0.0, 0.0, turn * tk / 2.0)
+                @ pin.Quaternion(q0[3:7]).toRotationMatrix()
+            )
+            qk[3:7] = pin.Quaternion(R).coeffs()
+            if who == "robot":
+                if 0.5 <= tk < 1.0:
+                    qk[2] += lift  # the whole robot rises: the sole lifts by `lift`
+                q[k] = qk
+            else:
+                pin.framesForwardKinematics(model, data, qk)
+                for name in ("pelvis", "left_hip", "right_hip", "left_knee", "right_knee",
+                             "left_ankle", "right_ankle"):  # fmt: skip
+                    p = data.oMf[robot.frame_id(kf[name])].translation.copy()
+                    human.setdefault("waist" if name == "pelvis" else name, []).append(p)
+    hum = {k: np.array(v) for k, v in human.items()}
+    hum["t"] = t
+    return RobotTrajectory(
+        t=t, q=q, v=np.zeros((len(t), robot.nv)), joint_names=list(robot.joint_names),
+        robot="g1", config_yaml="", human=hum, status=np.array(["ok"] * len(t)),
+    )  # fmt: skip
+
+
+def test_intervals_merge_close_runs():
+    t = np.arange(10) * 0.05
+    mask = np.array([0, 1, 1, 0, 1, 0, 0, 0, 1, 1], bool)
+    assert intervals(mask, t) == [(1, 3), (4, 5), (8, 10)]
+    # 0.11 s merge: the gap at 3 (last lifted t 0.10, next 0.20) is under it, 5-7 (0.20 -> 0.40) not.
+    assert intervals(mask, t, merge=0.11) == [(1, 5), (8, 10)]
+
+
+def test_robot_leg_length_g1_and_talos(g1):
+    # G1: hip_roll -> knee -> ankle_roll, about 0.6 m; Talos has no hip key-frames (fallback).
+    assert 0.5 < robot_leg_length(g1) < 0.7
+    assert 0.6 < robot_leg_length(load_robot("talos")) < 0.8
+
+
+def test_same_motion_scores_perfectly(g1):
+    m = human_metrics(_run(g1, turn_robot=0.5, turn_human=0.5, lift=0.0), g1)
+    # Same points: ratio 1 and zero errors to round-off (1e-9: FK and interpolation only).
+    assert m["leg_length_ratio"] == pytest.approx(1.0, abs=1e-9)
+    assert m["root_travel"]["ratio"] == pytest.approx(1.0, abs=1e-9)
+    assert m["root_travel"]["human_m"] == pytest.approx(0.995, abs=1e-9)  # 1.99 s at 0.5 m/s
+    assert m["heading_error_deg"]["max"] < 1e-6
+    assert m["pelvis_height_error_m"]["max"] < 1e-9
+    assert m["ankle_displacement_error_legs"]["rms"] < 1e-9
+    assert m["held_ticks"] == 0
+
+
+def test_heading_and_lift_errors_are_measured(g1):
+    m = human_metrics(_run(g1, turn_robot=0.0, turn_human=0.5, lift=0.05), g1)
+    # The person turned 0.5 rad = 28.6 deg, the robot not: final error -28.6 deg.
+    assert m["heading_error_deg"]["final"] == pytest.approx(-math.degrees(0.5) * 1.99 / 2, abs=0.2)
+    assert m["heading_error_deg"]["human_turn"] == pytest.approx(math.degrees(0.5) * 1.99 / 2, 0.01)
+    # The robot rose 5 cm for 0.5 s: pelvis height error 5 cm, one robot lift per foot, none
+    # for the person (no human foot key-point other than the ankle, which stays down).
+    assert m["pelvis_height_error_m"]["max"] == pytest.approx(0.05, abs=1e-9)
+    assert m["steps"]["left"] == {"robot": 1, "human": 0}
+    assert m["flight"]["robot"] == 1
+
+
+def test_run_without_person_is_refused(g1):
+    run = _run(g1, turn_robot=0.0, turn_human=0.0, lift=0.0)
+    run.human = {}
+    with pytest.raises(HumanMetricsError, match="no human key-points"):
+        human_metrics(run, g1)
