@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -52,6 +53,65 @@ def _labels(reader: Any, count: int) -> tuple[list[str], list[int]]:
     return labels, unnamed
 
 
+@dataclass
+class _C3dPoints:
+    """The 3D points of a C3D file as stored (file units, lab axes)."""
+
+    data: np.ndarray  # (frames, points, 4): x, y, z, residual (< 0: invalid sample)
+    first_frame: int
+    rate: float  # POINT:RATE [Hz]
+    units: str  # POINT:UNITS, lower case, "" when absent
+    labels: list[str]
+    unnamed: list[int]  # points that had no label
+    analog_used: int
+    analog_rate: float
+
+    @property
+    def num_frames(self) -> int:
+        return self.data.shape[0]
+
+
+def _read_points(path: Path, reader_class: Any) -> _C3dPoints:
+    """Header, labels and every frame of the points; a truncated file is an error."""
+    with path.open("rb") as handle:
+        try:
+            reader = reader_class(handle)
+        # The c3d package raises bare ValueError, AssertionError or struct.error on bad input.
+        except Exception as exc:
+            raise MotionFormatError(path, f"not a readable C3D file: {exc}") from None
+        count = int(reader.point_used)
+        if count == 0:
+            raise MotionFormatError(path, "the file holds no 3D points (POINT:USED = 0)")
+        first, last = int(reader.first_frame), int(reader.last_frame)
+        expected = last - first + 1
+        rate = float(reader.point_rate)
+        units_param = reader.get("POINT:UNITS")
+        units = units_param.string_value.strip().lower() if units_param is not None else ""
+        labels, unnamed = _labels(reader, count)
+        data = np.empty((expected, count, 4))
+        read = 0
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for _, points, _ in reader.read_frames(copy=False):
+                if read == expected:
+                    read += 1
+                    break
+                data[read] = points[:, :4]
+                read += 1
+        if read != expected:
+            detail = f" ({' '.join(str(caught[0].message).split())})" if caught else ""
+            raise MotionFormatError(
+                path,
+                f"header says frames {first}..{last} ({expected} frames), found {read}; "
+                f"the file is truncated{detail}",
+                frame=first + min(read, expected),
+            )
+        return _C3dPoints(
+            data, first, rate, units, labels, unnamed, int(reader.analog_used),
+            float(reader.analog_rate),
+        )  # fmt: skip
+
+
 def read_c3d(
     path: str | Path,
     *,
@@ -83,53 +143,12 @@ def read_c3d(
     except ImportError:
         raise missing_dependency("mocap", "reading C3D files (the c3d package)") from None
     path = Path(path)
-    with path.open("rb") as handle:
-        try:
-            reader = c3d.Reader(handle)
-        # The c3d package raises bare ValueError, AssertionError or struct.error on bad input.
-        except Exception as exc:
-            raise MotionFormatError(path, f"not a readable C3D file: {exc}") from None
-        count = int(reader.point_used)
-        if count == 0:
-            raise MotionFormatError(path, "the file holds no 3D points (POINT:USED = 0)")
-        first, last = int(reader.first_frame), int(reader.last_frame)
-        expected = last - first + 1
-        rate = float(reader.point_rate)
-        units_param = reader.get("POINT:UNITS")
-        units = units_param.string_value.strip().lower() if units_param is not None else ""
-        labels, unnamed = _labels(reader, count)
-        data = np.empty((expected, count, 4))
-        read = 0
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            for _, points, _ in reader.read_frames(copy=False):
-                if read == expected:
-                    read += 1
-                    break
-                data[read] = points[:, :4]
-                read += 1
-        if read != expected:
-            detail = f" ({' '.join(str(caught[0].message).split())})" if caught else ""
-            raise MotionFormatError(
-                path,
-                f"header says frames {first}..{last} ({expected} frames), found {read}; "
-                f"the file is truncated{detail}",
-                frame=first + min(read, expected),
-            )
-        analog_used = int(reader.analog_used)
-        analog_rate = float(reader.analog_rate)
+    stored = _read_points(path, c3d.Reader)
+    rate, units, labels, expected = stored.rate, stored.units, stored.labels, stored.num_frames
+    data, first, unnamed, count = stored.data, stored.first_frame, stored.unnamed, len(labels)
     if not (math.isfinite(rate) and rate > 0):
         raise MotionFormatError(path, f"POINT:RATE must be positive, found {rate}")
-    if length_scale is None:
-        if units not in _UNITS:
-            raise MotionFormatError(
-                path,
-                f"unknown POINT:UNITS {units!r}; expected one of {sorted(_UNITS)}, "
-                "or pass length_scale=<metres per file unit>",
-            )
-        scale = _UNITS[units]
-    else:
-        scale = float(length_scale)
+    scale = _length_scale(path, units, length_scale)
     positions = data[:, :, :3] * scale
     missing = data[:, :, 3] < 0
     positions[missing] = np.nan
@@ -150,12 +169,32 @@ def read_c3d(
             "first_frame": first,
             "missing_fraction": float(missing.mean()),
             "unnamed_points": [labels[i] for i in unnamed],
-            "analog_channels": analog_used,
-            "analog_rate": analog_rate,
+            "analog_channels": stored.analog_used,
+            "analog_rate": stored.analog_rate,
         },
     )
     if marker_map is None:
         return motion
+    return _keypoints(motion, marker_map)
+
+
+def _length_scale(path: Path, units: str, length_scale: float | None) -> float:
+    """Metres per file unit: ``length_scale``, or the one ``POINT:UNITS`` names."""
+    if length_scale is not None:
+        return float(length_scale)
+    if units not in _UNITS:
+        raise MotionFormatError(
+            path,
+            f"unknown POINT:UNITS {units!r}; expected one of {sorted(_UNITS)}, "
+            "or pass length_scale=<metres per file unit>",
+        )
+    return _UNITS[units]
+
+
+def _keypoints(
+    motion: HumanMotion, marker_map: KeypointMap | str | Path | Mapping[str, Any]
+) -> HumanMotion:
+    """The motion with one point per key-point of ``marker_map`` (averaged markers)."""
     from .keypoints import load_keypoint_map
 
     kmap = load_keypoint_map(marker_map)
