@@ -326,80 +326,14 @@ def calibrate(
             "(--start) or raise retarget.calibration.frames"
         )
     kept_tree = build_tree(shared, tree)
-
-    # Lengths: median over the calibration samples (human), reference posture (robot).
-    human_lengths: dict[str, float] = {}
-    robot_lengths: dict[str, float] = {}
-    for child, parent in kept_tree.items():
-        if parent is None:
-            continue
-        lh = _median_length(np.asarray(human[child], float), np.asarray(human[parent], float))
-        if math.isfinite(lh):
-            human_lengths[child] = lh
-        robot_lengths[child] = float(np.linalg.norm(robot_pts[child] - robot_pts[parent]))
-
-    # Heading.
-    if human_waist_rotation is not None:
-        Rw = np.asarray(human_waist_rotation, float).reshape(-1, 3, 3)
-        ok = np.all(np.isfinite(Rw), axis=(1, 2))
-        human_heading = yaw_of(Rw[ok][0][:, 0]) if ok.any() else math.nan
-    else:
-        human_heading = math.nan
-    if not math.isfinite(human_heading):
-        human_heading = _heading_from_points(human_pts)
-        if not math.isfinite(human_heading):
-            human_heading = 0.0
-            notes.append("no waist orientation, hips or shoulders: human heading taken as 0")
-    if robot_waist_rotation is not None:
-        robot_heading = yaw_of(np.asarray(robot_waist_rotation, float)[:, 0])
-    else:
-        robot_heading = _heading_from_points(robot_pts)
-        if not math.isfinite(robot_heading):
-            robot_heading = 0.0
+    human_lengths, robot_lengths = _segment_lengths(kept_tree, human, robot_pts)
+    human_heading, robot_heading = _headings(
+        human_pts, robot_pts, human_waist_rotation, robot_waist_rotation, notes
+    )
     yaw = _wrap(robot_heading - human_heading)
-
-    # Heights.
-    def ankle_height(points: Mapping[str, np.ndarray]) -> float:
-        zs = [points[k][2] for k in ("left_ankle", "right_ankle") if k in points]
-        zs = [z for z in zs if math.isfinite(z)]
-        return float(np.mean(zs)) if zs else math.nan
-
-    h_ankle = ankle_height(human_pts)
-    r_ankle = ankle_height(robot_pts)
-    if not math.isfinite(h_ankle) or not math.isfinite(r_ankle):
-        # Upper-body data: keep the waist heights as they are (no vertical scaling reference).
-        notes.append("no ankles on both sides: waist heights are matched instead of ankles")
-        h_ankle = float(human_pts["waist"][2]) - float(robot_pts["waist"][2])
-        r_ankle = 0.0
-
-    # Feet yaw (human: ankle -> toe; robot: sole x axis).
-    human_foot_yaw: dict[str, float] = {}
-    robot_foot_yaw: dict[str, float] = {}
-    for side, names in FEET.items():
-        a, t = human_pts.get(names["ankle"]), human_pts.get(names["toe"])
-        if a is not None and t is not None and np.all(np.isfinite(t - a)):
-            human_foot_yaw[side] = yaw_of(t - a)
-        if robot_foot_rotations is not None and side in robot_foot_rotations:
-            robot_foot_yaw[side] = yaw_of(np.asarray(robot_foot_rotations[side], float)[:, 0])
-
-    # Double support (Poubel 2014 III.A): mid-ankle -> mid-hip distance ratio.
-    ratio = 1.0
-    needed = ("left_ankle", "right_ankle", "left_hip", "right_hip")
-    if all(k in human_pts and k in robot_pts for k in needed):
-        lh = float(
-            np.linalg.norm(
-                0.5 * (human_pts["left_hip"] + human_pts["right_hip"])
-                - 0.5 * (human_pts["left_ankle"] + human_pts["right_ankle"])
-            )
-        )
-        lr = float(
-            np.linalg.norm(
-                0.5 * (robot_pts["left_hip"] + robot_pts["right_hip"])
-                - 0.5 * (robot_pts["left_ankle"] + robot_pts["right_ankle"])
-            )
-        )
-        if math.isfinite(lh) and lh > 1e-6:
-            ratio = lr / lh
+    h_ankle, r_ankle = _ankle_heights(human_pts, robot_pts, notes)
+    human_foot_yaw, robot_foot_yaw = _foot_yaws(human_pts, robot_foot_rotations)
+    ratio = _double_support_ratio(human_pts, robot_pts)
     return Calibration(
         tree=kept_tree,
         yaw=yaw,
@@ -418,6 +352,119 @@ def calibrate(
         double_support_ratio=ratio,
         notes=notes,
     )
+
+
+def _segment_lengths(
+    tree: Mapping[str, str | None],
+    human: Mapping[str, npt.ArrayLike],
+    robot_pts: Mapping[str, np.ndarray],
+) -> tuple[dict[str, float], dict[str, float]]:
+    """Segment (child) -> length [m], human (median over the samples) and robot (reference).
+
+    A human segment never measured (NaN in every sample) is left out.
+    """
+    human_lengths: dict[str, float] = {}
+    robot_lengths: dict[str, float] = {}
+    for child, parent in tree.items():
+        if parent is None:
+            continue
+        lh = _median_length(np.asarray(human[child], float), np.asarray(human[parent], float))
+        if math.isfinite(lh):
+            human_lengths[child] = lh
+        robot_lengths[child] = float(np.linalg.norm(robot_pts[child] - robot_pts[parent]))
+    return human_lengths, robot_lengths
+
+
+def _headings(
+    human_pts: Mapping[str, np.ndarray],
+    robot_pts: Mapping[str, np.ndarray],
+    human_waist_rotation: npt.ArrayLike | None,
+    robot_waist_rotation: npt.ArrayLike | None,
+    notes: list[str],
+) -> tuple[float, float]:
+    r""":math:`(\psi_h, \psi_r)`: yaw of the waist x axis, else from hips or shoulders, else 0."""
+    if human_waist_rotation is not None:
+        Rw = np.asarray(human_waist_rotation, float).reshape(-1, 3, 3)
+        ok = np.all(np.isfinite(Rw), axis=(1, 2))
+        human_heading = yaw_of(Rw[ok][0][:, 0]) if ok.any() else math.nan
+    else:
+        human_heading = math.nan
+    if not math.isfinite(human_heading):
+        human_heading = _heading_from_points(human_pts)
+        if not math.isfinite(human_heading):
+            human_heading = 0.0
+            notes.append("no waist orientation, hips or shoulders: human heading taken as 0")
+    if robot_waist_rotation is not None:
+        robot_heading = yaw_of(np.asarray(robot_waist_rotation, float)[:, 0])
+    else:
+        robot_heading = _heading_from_points(robot_pts)
+        if not math.isfinite(robot_heading):
+            robot_heading = 0.0
+    return human_heading, robot_heading
+
+
+def _ankle_height(points: Mapping[str, np.ndarray]) -> float:
+    """Mean height of the finite ankles [m], NaN if none."""
+    zs = [points[k][2] for k in ("left_ankle", "right_ankle") if k in points]
+    zs = [z for z in zs if math.isfinite(z)]
+    return float(np.mean(zs)) if zs else math.nan
+
+
+def _ankle_heights(
+    human_pts: Mapping[str, np.ndarray], robot_pts: Mapping[str, np.ndarray], notes: list[str]
+) -> tuple[float, float]:
+    """Human and robot ankle heights; without ankles on both sides, the waists are matched."""
+    h_ankle = _ankle_height(human_pts)
+    r_ankle = _ankle_height(robot_pts)
+    if not math.isfinite(h_ankle) or not math.isfinite(r_ankle):
+        # Upper-body data: keep the waist heights as they are (no vertical scaling reference).
+        notes.append("no ankles on both sides: waist heights are matched instead of ankles")
+        h_ankle = float(human_pts["waist"][2]) - float(robot_pts["waist"][2])
+        r_ankle = 0.0
+    return h_ankle, r_ankle
+
+
+def _foot_yaws(
+    human_pts: Mapping[str, np.ndarray],
+    robot_foot_rotations: Mapping[str, npt.ArrayLike] | None,
+) -> tuple[dict[str, float], dict[str, float]]:
+    """Per side, the foot yaw [rad]: human ankle -> toe, robot sole x axis."""
+    human_foot_yaw: dict[str, float] = {}
+    robot_foot_yaw: dict[str, float] = {}
+    for side, names in FEET.items():
+        a, t = human_pts.get(names["ankle"]), human_pts.get(names["toe"])
+        if a is not None and t is not None and np.all(np.isfinite(t - a)):
+            human_foot_yaw[side] = yaw_of(t - a)
+        if robot_foot_rotations is not None and side in robot_foot_rotations:
+            robot_foot_yaw[side] = yaw_of(np.asarray(robot_foot_rotations[side], float)[:, 0])
+    return human_foot_yaw, robot_foot_yaw
+
+
+def _hip_to_ankle(points: Mapping[str, np.ndarray]) -> float:
+    """Distance from the mid-ankle to the mid-hip point [m]."""
+    return float(
+        np.linalg.norm(
+            0.5 * (points["left_hip"] + points["right_hip"])
+            - 0.5 * (points["left_ankle"] + points["right_ankle"])
+        )
+    )
+
+
+def _double_support_ratio(
+    human_pts: Mapping[str, np.ndarray], robot_pts: Mapping[str, np.ndarray]
+) -> float:
+    """Poubel 2014 Sec. III.A: :math:`L_r / L_h` of the mid-ankle to mid-hip distances.
+
+    1 when a side lacks a hip or an ankle, or the human distance is not positive.
+    """
+    needed = ("left_ankle", "right_ankle", "left_hip", "right_hip")
+    if not all(k in human_pts and k in robot_pts for k in needed):
+        return 1.0
+    lh = _hip_to_ankle(human_pts)
+    lr = _hip_to_ankle(robot_pts)
+    if math.isfinite(lh) and lh > 1e-6:
+        return lr / lh
+    return 1.0
 
 
 def _heading_from_points(points: Mapping[str, np.ndarray]) -> float:
