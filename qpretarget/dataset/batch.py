@@ -92,14 +92,14 @@ def discover_inputs(inputs: Sequence[str]) -> list[tuple[Path, Path]]:
     Raises:
         ConfigError: an input that exists nowhere, or no motion file at all.
     """
-    from ..motion.load import MOTION_EXTENSIONS
+    from ..motion.load import MOTION_EXTENSIONS, SCANNED_ENDINGS, is_scanned_motion_file
 
     found: dict[Path, Path] = {}
     for item in inputs:
         p = Path(item)
         if p.is_dir():
             for f in sorted(p.rglob("*")):
-                if f.is_file() and f.suffix.lower() in MOTION_EXTENSIONS:
+                if f.is_file() and is_scanned_motion_file(f):
                     found.setdefault(f.resolve(), p.resolve())
         elif p.is_file():
             found.setdefault(p.resolve(), p.resolve().parent)
@@ -115,8 +115,9 @@ def discover_inputs(inputs: Sequence[str]) -> list[tuple[Path, Path]]:
                     found.setdefault(mp.resolve(), mp.resolve().parent)
     if not found:
         raise ConfigError(
-            "no motion file found in the inputs (extensions "
-            f"{', '.join(MOTION_EXTENSIONS)}; .asf skeletons are read with their .amc)."
+            "no motion file found in the inputs (folders: "
+            f"{', '.join(SCANNED_ENDINGS)}; files and globs: {', '.join(MOTION_EXTENSIONS)}; "
+            ".asf skeletons are read with their .amc)."
         )
     return sorted(found.items())
 

@@ -10,9 +10,19 @@ from .asf_amc import read_asf_amc
 from .bvh import read_bvh
 from .c3d_ import read_c3d
 from .human_motion import HumanMotion
+from .positions import read_positions
 
-#: Extensions :func:`load_motion` understands.
-MOTION_EXTENSIONS = (".bvh", ".amc", ".c3d")
+#: Extensions :func:`load_motion` understands (``.npz``/``.csv``: key-point files).
+MOTION_EXTENSIONS = (".bvh", ".amc", ".c3d", ".npz", ".csv")
+
+#: Endings a folder scan (``qpretarget batch DIR``) picks up: key-point files only under these
+#: double endings, so a folder holding runs or CSV exports is not read as key-points.
+SCANNED_ENDINGS = (".bvh", ".amc", ".c3d", ".keypoints.npz", ".keypoints.csv")
+
+
+def is_scanned_motion_file(path: str | Path) -> bool:
+    """Whether a folder scan takes ``path`` as a motion file (:data:`SCANNED_ENDINGS`)."""
+    return str(path).lower().endswith(SCANNED_ENDINGS)
 
 
 def find_asf(amc_path: str | Path) -> Path:
@@ -54,6 +64,7 @@ def load_motion(path: str | Path, **options: Any) -> HumanMotion:
     * ``.amc`` -> :func:`~qpretarget.motion.asf_amc.read_asf_amc`, skeleton from ``asf=`` or
       :func:`find_asf`
     * ``.c3d`` -> :func:`~qpretarget.motion.c3d_.read_c3d`
+    * ``.npz``, ``.csv`` -> :func:`~qpretarget.motion.positions.read_positions` (key-point files)
 
     Args:
         path: The motion file.
@@ -83,5 +94,7 @@ def load_motion(path: str | Path, **options: Any) -> HumanMotion:
         return read_bvh(path, **options)
     if suffix == ".c3d":
         return read_c3d(path, **options)
+    if suffix in (".npz", ".csv"):
+        return read_positions(path)
     asf = options.pop("asf", None)
     return read_asf_amc(find_asf(path) if asf is None else asf, path, **options)
