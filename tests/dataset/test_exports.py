@@ -19,6 +19,17 @@ from qpretarget.trajectory import RobotTrajectory
 
 from .conftest import MOCAP
 
+#: The G1 joint order of mjlab's / BeyondMimic's scripts/csv_to_npz.py (the joint-name list it
+#: passes for its G1 scene; read in its public source, docs/formats.md): columns 7.. of the CSV.
+MJLAB_G1_JOINTS = [
+    f"{s}_{j}_joint" for s in ("left", "right")
+    for j in ("hip_pitch", "hip_roll", "hip_yaw", "knee", "ankle_pitch", "ankle_roll")
+] + ["waist_yaw_joint", "waist_roll_joint", "waist_pitch_joint"] + [
+    f"{s}_{j}_joint" for s in ("left", "right")
+    for j in ("shoulder_pitch", "shoulder_roll", "shoulder_yaw", "elbow", "wrist_roll",
+              "wrist_pitch", "wrist_yaw")
+]  # fmt: skip
+
 
 @pytest.fixture(scope="module")
 def run_and_robot(repo_dir):
@@ -36,6 +47,7 @@ def test_csv_is_the_lafan1_layout_with_a_sidecar(tmp_path, run_and_robot):
     assert {f.name for f in files} == {"clip.csv", "clip.json"}
     assert table.shape == (len(out.t), 7 + 29)
     assert side["joint_names"] == robot.joint_names  # URDF actuated-joint order
+    assert side["joint_names"] == MJLAB_G1_JOINTS  # what the trainers' reader assumes
     assert side["columns"][7:] == robot.joint_names and side["quaternion"] == "xyzw"
     assert side["fps"] == 30.0 and side["frames"] == len(table)
     np.testing.assert_allclose(np.linalg.norm(table[:, 3:7], axis=1), 1.0, atol=1e-8)
