@@ -73,6 +73,20 @@ def _support_polygon(robot, data, contacts: np.ndarray, foot_names: list[str]) -
     return pts[hull.vertices]
 
 
+@dataclass
+class _Scene:
+    """The matplotlib figure of a render and the artists updated every frame."""
+
+    fig: Any
+    ax: Any
+    poly: Any  # robot triangles
+    bones: Any  # human skeleton
+    support: Any  # support polygon
+    com_pt: Any
+    tgt_pts: Any
+    title: Any
+
+
 def render_run(
     traj: RobotTrajectory,
     out: str | Path,
@@ -100,6 +114,38 @@ def render_run(
     if fps <= 0 or width < 64 or height < 64:
         raise QPRetargetError("fps must be > 0 and the image at least 64x64 pixels.")
     t = np.asarray(traj.t, dtype=float)
+    idx = _frame_samples(t, fps, start, end)
+
+    ctrl = traj.make_controller()
+    robot = ctrl.robot
+    data = robot.model.createData()
+    meshes: list[LinkMesh] = load_link_meshes(robot, simplify=True, max_points=48)
+    human = _human_beside(traj, robot, data) if show_human and traj.human else {}
+    scene = _make_scene(plt, width, height)
+    _fix_view(scene.ax, traj, robot, data, idx, human)
+
+    frames = []
+    tw = time.perf_counter()
+    it: Any = range(len(idx))
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc="render", unit="frame")
+    draw = _FrameDrawer(scene, traj, robot, data, meshes, human)
+    for n in it:
+        k = int(idx[n])
+        draw(k, f"{robot.name}   t = {t[k]:.2f} s")
+        scene.fig.canvas.draw()
+        buf = np.asarray(scene.fig.canvas.buffer_rgba())
+        frames.append(Image.fromarray(buf[:, :, :3].copy()))
+    wall = time.perf_counter() - tw
+    plt.close(scene.fig)
+    _write_frames(out, frames, fps)
+    return RenderInfo(out, len(frames), width, height, fps, len(frames) / max(wall, 1e-9))
+
+
+def _frame_samples(t: np.ndarray, fps: float, start: float | None, end: float | None) -> np.ndarray:
+    """Indices of the run samples shown at ``fps`` over ``[start, end]`` (clipped to the run)."""
     t0 = t[0] if start is None else max(t[0], start)
     t1 = t[-1] if end is None else min(t[-1], end)
     if t1 < t0:
@@ -107,33 +153,26 @@ def render_run(
             f"empty time window [{t0}, {t1}] s (run spans {t[0]:.2f}-{t[-1]:.2f} s)."
         )
     times = t0 + np.arange(int(np.floor((t1 - t0) * fps + 1e-9)) + 1) / fps
-    idx = np.clip(np.searchsorted(t, times - 1e-9), 0, len(t) - 1)
+    return np.clip(np.searchsorted(t, times - 1e-9), 0, len(t) - 1)
 
-    ctrl = traj.make_controller()
-    robot = ctrl.robot
-    data = robot.model.createData()
-    meshes: list[LinkMesh] = load_link_meshes(robot, simplify=True, max_points=48)
-    base_colors = np.array([m.color for m in meshes])
-    counts = [len(m.faces) for m in meshes]
-    tris_local = [m.vertices[m.faces] for m in meshes]  # (F, 3, 3) each
 
-    human = {}
-    if show_human and traj.human:
-        pin.forwardKinematics(robot.model, data, traj.q[0])
-        base = traj.q[0, :2] if robot.free_flyer else np.zeros(2)
-        yaw = 0.0
-        if robot.free_flyer:
-            R0 = pin.Quaternion(traj.q[0, 3:7]).toRotationMatrix()
-            yaw = float(np.arctan2(R0[1, 0], R0[0, 0]))
-        human = place_beside(
-            {k: v for k, v in traj.human.items() if np.ndim(v) == 2 and np.shape(v)[1] == 3},
-            base,
-            yaw,
-        )
-        # human samples may be at another rate: map by time when a time axis is given
-        if "t" in traj.human:
-            pass
+def _human_beside(traj: RobotTrajectory, robot: Any, data: Any) -> dict[str, np.ndarray]:
+    """The human key-point tracks of the run, placed beside the robot's first pose."""
+    pin.forwardKinematics(robot.model, data, traj.q[0])
+    base = traj.q[0, :2] if robot.free_flyer else np.zeros(2)
+    yaw = 0.0
+    if robot.free_flyer:
+        R0 = pin.Quaternion(traj.q[0, 3:7]).toRotationMatrix()
+        yaw = float(np.arctan2(R0[1, 0], R0[0, 0]))
+    return place_beside(
+        {k: v for k, v in traj.human.items() if np.ndim(v) == 2 and np.shape(v)[1] == 3},
+        base,
+        yaw,
+    )
 
+
+def _make_scene(plt: Any, width: int, height: int) -> _Scene:
+    """A borderless 3D figure of ``width x height`` pixels with empty artists."""
     dpi = 100
     fig = plt.figure(figsize=(width / dpi, height / dpi), dpi=dpi)
     ax = fig.add_axes([0, 0, 1, 1], projection="3d", computed_zorder=False)
@@ -150,7 +189,18 @@ def render_run(
     (com_pt,) = ax.plot([], [], [], "o", color="tab:green", ms=4, zorder=1)
     (tgt_pts,) = ax.plot([], [], [], "o", color="tab:red", ms=3, zorder=3)
     title = ax.text2D(0.02, 0.96, "", transform=ax.transAxes, fontsize=9)
-    # Fixed view box around the whole motion.
+    return _Scene(fig, ax, poly, bones, support, com_pt, tgt_pts, title)
+
+
+def _fix_view(
+    ax: Any,
+    traj: RobotTrajectory,
+    robot: Any,
+    data: Any,
+    idx: np.ndarray,
+    human: dict[str, np.ndarray],
+) -> None:
+    """Fixed view box around the whole motion, with a light ground grid."""
     pin.forwardKinematics(robot.model, data, traj.q[idx[0]])
     robot_height = max(
         float(max(data.oMi[j].translation[2] for j in range(robot.model.njoints))), 0.5
@@ -164,7 +214,6 @@ def render_run(
     ax.set_xlim(centre[0] - half, centre[0] + half)
     ax.set_ylim(centre[1] - half, centre[1] + half)
     ax.set_zlim(0.0, 2 * half)
-    # ground: a light grid around the scene
     g = np.linspace(-half, half, 9)
     for v in g:
         ax.plot(centre[0] + g, np.full(9, centre[1] + v), 0.0, color="0.85", lw=0.6, zorder=0)
@@ -172,63 +221,79 @@ def render_run(
     ax.set_box_aspect((1, 1, 1))
     ax.view_init(elev=15, azim=-20)
     ax.set_axis_off()
-    light = np.array([0.3, -0.5, 0.8])
-    light /= np.linalg.norm(light)
-    feet = traj.foot_names
-    contacts = traj.contacts if traj.contacts is not None and traj.contacts.size else None
-    targets = [traj.targets[k] for k in traj.task_names if k in traj.targets]
 
-    frames = []
-    tw = time.perf_counter()
-    it = range(len(idx))
-    if progress:
-        from tqdm import tqdm
 
-        it = tqdm(it, desc="render", unit="frame")
-    for n in it:
-        k = int(idx[n])
-        q = traj.q[k]
+class _FrameDrawer:
+    """Updates the scene's artists to one sample of the run (robot, human, support, targets)."""
+
+    def __init__(
+        self,
+        scene: _Scene,
+        traj: RobotTrajectory,
+        robot: Any,
+        data: Any,
+        meshes: list[LinkMesh],
+        human: dict[str, np.ndarray],
+    ) -> None:
+        self.scene, self.traj, self.robot, self.data = scene, traj, robot, data
+        self.meshes, self.human = meshes, human
+        self.base_colors = np.array([m.color for m in meshes])
+        self.counts = [len(m.faces) for m in meshes]
+        self.tris_local = [m.vertices[m.faces] for m in meshes]  # (F, 3, 3) each
+        light = np.array([0.3, -0.5, 0.8])
+        self.light = light / np.linalg.norm(light)
+        self.contacts = traj.contacts if traj.contacts is not None and traj.contacts.size else None
+        self.targets = [traj.targets[k] for k in traj.task_names if k in traj.targets]
+
+    def __call__(self, k: int, title: str) -> None:
+        """Show sample ``k`` with ``title``."""
+        scene, robot, data = self.scene, self.robot, self.data
+        q = self.traj.q[k]
         pin.forwardKinematics(robot.model, data, q)
         pin.updateFramePlacements(robot.model, data)
+        self._robot_mesh()
+        if self.human:
+            hk = min(k, len(next(iter(self.human.values()))) - 1)
+            scene.bones.set_segments(skeleton_segments(self.human, hk))
+        if robot.free_flyer:
+            com = pin.centerOfMass(robot.model, data, q)
+            scene.com_pt.set_data_3d([com[0]], [com[1]], [0.0])
+            if self.contacts is not None:
+                self._support(self.contacts[k])
+        if self.targets:
+            P = np.array([tg[k] for tg in self.targets])
+            scene.tgt_pts.set_data_3d(P[:, 0], P[:, 1], P[:, 2])
+        scene.title.set_text(title)
+
+    def _robot_mesh(self) -> None:
+        """Link hulls at the current kinematics, shaded by a fixed directional light."""
         tris = []
-        for m, loc in zip(meshes, tris_local, strict=True):
-            M = data.oMi[m.parent_joint] * m.placement
+        for m, loc in zip(self.meshes, self.tris_local, strict=True):
+            M = self.data.oMi[m.parent_joint] * m.placement
             tris.append(loc @ M.rotation.T + M.translation)
         T = np.concatenate(tris)
         nrm = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
         nrm /= np.linalg.norm(nrm, axis=1, keepdims=True) + 1e-12
-        shade = 0.45 + 0.55 * np.abs(nrm @ light)
-        fc = np.repeat(base_colors, counts, axis=0).copy()
+        shade = 0.45 + 0.55 * np.abs(nrm @ self.light)
+        fc = np.repeat(self.base_colors, self.counts, axis=0).copy()
         fc[:, :3] *= shade[:, None]
-        poly.set_verts(T)
-        poly.set_facecolor(fc)
-        if human:
-            hk = min(k, len(next(iter(human.values()))) - 1)
-            bones.set_segments(skeleton_segments(human, hk))
-        if robot.free_flyer:
-            com = pin.centerOfMass(robot.model, data, q)
-            com_pt.set_data_3d([com[0]], [com[1]], [0.0])
-            if contacts is not None:
-                hull = _support_polygon(robot, data, contacts[k], feet)
-                if len(hull):
-                    ring = np.vstack([hull, hull[:1]])
-                    segs = np.stack(
-                        [
-                            np.c_[ring[:-1], np.zeros(len(hull))],
-                            np.c_[ring[1:], np.zeros(len(hull))],
-                        ],
-                        axis=1,
-                    )
-                    support.set_segments(segs)
-        if targets:
-            P = np.array([tg[k] for tg in targets])
-            tgt_pts.set_data_3d(P[:, 0], P[:, 1], P[:, 2])
-        title.set_text(f"{robot.name}   t = {t[k]:.2f} s")
-        fig.canvas.draw()
-        buf = np.asarray(fig.canvas.buffer_rgba())
-        frames.append(Image.fromarray(buf[:, :, :3].copy()))
-    wall = time.perf_counter() - tw
-    plt.close(fig)
+        self.scene.poly.set_verts(T)
+        self.scene.poly.set_facecolor(fc)
+
+    def _support(self, active: np.ndarray) -> None:
+        """Outline of the support polygon of the feet in contact (kept when it is degenerate)."""
+        hull = _support_polygon(self.robot, self.data, active, self.traj.foot_names)
+        if len(hull):
+            ring = np.vstack([hull, hull[:1]])
+            segs = np.stack(
+                [np.c_[ring[:-1], np.zeros(len(hull))], np.c_[ring[1:], np.zeros(len(hull))]],
+                axis=1,
+            )
+            self.scene.support.set_segments(segs)
+
+
+def _write_frames(out: Path, frames: list[Any], fps: float) -> None:
+    """Write the frames as an animated GIF, or an MP4 through imageio-ffmpeg."""
     out.parent.mkdir(parents=True, exist_ok=True)
     if out.suffix.lower() == ".gif":
         frames[0].save(
@@ -247,4 +312,3 @@ def render_run(
                 f"writing {out.name} needs an MP4 encoder "
                 f"(`pip install imageio imageio-ffmpeg`): {exc}"
             ) from None
-    return RenderInfo(out, len(frames), width, height, fps, len(frames) / max(wall, 1e-9))
