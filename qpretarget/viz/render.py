@@ -24,7 +24,7 @@ import pinocchio as pin
 from ..errors import QPRetargetError, missing_dependency
 from ..trajectory import RobotTrajectory
 from .meshes import LinkMesh, load_link_meshes
-from .skeleton import place_beside, skeleton_segments
+from .skeleton import beside_robot, skeleton_segments
 
 
 @dataclass
@@ -71,6 +71,22 @@ def _support_polygon(robot, data, contacts: np.ndarray, foot_names: list[str]) -
     except Exception:
         return np.zeros((0, 2))
     return pts[hull.vertices]
+
+
+def support_outline(
+    robot: Any, data: Any, active: np.ndarray, foot_names: list[str], z: float
+) -> np.ndarray:
+    """(K, 2, 3) edges of the support polygon (:func:`_support_polygon`) drawn at height ``z``.
+
+    Empty (0, 2, 3) when the active soles give no polygon.
+    """
+    hull = _support_polygon(robot, data, active, foot_names)
+    if not len(hull):
+        return np.zeros((0, 2, 3))
+    ring = np.vstack([hull, hull[:1]])
+    return np.stack(
+        [np.c_[ring[:-1], np.full(len(hull), z)], np.c_[ring[1:], np.full(len(hull), z)]], axis=1
+    )
 
 
 @dataclass
@@ -120,7 +136,7 @@ def render_run(
     robot = ctrl.robot
     data = robot.model.createData()
     meshes: list[LinkMesh] = load_link_meshes(robot, simplify=True, max_points=48)
-    human = _human_beside(traj, robot, data) if show_human and traj.human else {}
+    human = beside_robot(traj.human, traj.q[0], robot.free_flyer) if show_human else {}
     scene = _make_scene(plt, width, height)
     _fix_view(scene.ax, traj, robot, data, idx, human)
 
@@ -154,21 +170,6 @@ def _frame_samples(t: np.ndarray, fps: float, start: float | None, end: float | 
         )
     times = t0 + np.arange(int(np.floor((t1 - t0) * fps + 1e-9)) + 1) / fps
     return np.clip(np.searchsorted(t, times - 1e-9), 0, len(t) - 1)
-
-
-def _human_beside(traj: RobotTrajectory, robot: Any, data: Any) -> dict[str, np.ndarray]:
-    """The human key-point tracks of the run, placed beside the robot's first pose."""
-    pin.forwardKinematics(robot.model, data, traj.q[0])
-    base = traj.q[0, :2] if robot.free_flyer else np.zeros(2)
-    yaw = 0.0
-    if robot.free_flyer:
-        R0 = pin.Quaternion(traj.q[0, 3:7]).toRotationMatrix()
-        yaw = float(np.arctan2(R0[1, 0], R0[0, 0]))
-    return place_beside(
-        {k: v for k, v in traj.human.items() if np.ndim(v) == 2 and np.shape(v)[1] == 3},
-        base,
-        yaw,
-    )
 
 
 def _make_scene(plt: Any, width: int, height: int) -> _Scene:
@@ -282,13 +283,8 @@ class _FrameDrawer:
 
     def _support(self, active: np.ndarray) -> None:
         """Outline of the support polygon of the feet in contact (kept when it is degenerate)."""
-        hull = _support_polygon(self.robot, self.data, active, self.traj.foot_names)
-        if len(hull):
-            ring = np.vstack([hull, hull[:1]])
-            segs = np.stack(
-                [np.c_[ring[:-1], np.zeros(len(hull))], np.c_[ring[1:], np.zeros(len(hull))]],
-                axis=1,
-            )
+        segs = support_outline(self.robot, self.data, active, self.traj.foot_names, 0.0)
+        if len(segs):
             self.scene.support.set_segments(segs)
 
 

@@ -3,7 +3,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
+import pinocchio as pin
 
 #: Bones between key-points (Dariush 2009 Fig. 2 plus legs), drawn where both ends exist.
 BONES: tuple[tuple[str, str], ...] = (
@@ -60,3 +64,23 @@ def place_beside(
         w = (v - np.array([ref[0], ref[1], floor])) @ R.T
         out[k] = w + target
     return out
+
+
+def beside_robot(
+    human: Mapping[str, Any], q0: np.ndarray, free_flyer: bool
+) -> dict[str, np.ndarray]:
+    """The ``(T, 3)`` key-point tracks of ``human`` placed beside a robot at configuration ``q0``.
+
+    The robot's base position and heading (yaw of its base x axis) come from ``q0`` when it has a
+    free flyer, else the origin and heading 0; see :func:`place_beside`. Entries that are not
+    ``(T, 3)`` tracks are left out; ``{}`` when none is.
+    """
+    pts = {k: np.asarray(v) for k, v in human.items() if np.ndim(v) == 2 and np.shape(v)[1] == 3}
+    if not pts:
+        return {}
+    base = q0[:2] if free_flyer else np.zeros(2)
+    yaw = 0.0
+    if free_flyer:
+        R0 = pin.Quaternion(q0[3:7]).toRotationMatrix()
+        yaw = float(np.arctan2(R0[1, 0], R0[0, 0]))
+    return place_beside(pts, base, yaw)

@@ -26,7 +26,7 @@ import pinocchio as pin
 from ..errors import QPRetargetError, missing_dependency
 from ..robot import RobotModel
 from .meshes import load_link_meshes
-from .skeleton import place_beside, skeleton_segments
+from .skeleton import beside_robot, skeleton_segments
 
 
 class ViewerError(QPRetargetError, RuntimeError):
@@ -153,116 +153,9 @@ class Viewer:
     # ------------------------------------------------------------------ run replay
     def show_run(self, traj: Any, *, series: dict[str, np.ndarray] | None = None) -> None:
         """Replay a :class:`~qpretarget.trajectory.RobotTrajectory` with a timeline."""
-        robot = self.robot
-        T = len(traj.t)
-        scene, gui = self.server.scene, self.server.gui
-        targets = {k: np.asarray(traj.targets[k]) for k in traj.task_names if k in traj.targets}
-        actual = {k: np.asarray(traj.actual[k]) for k in traj.task_names if k in traj.actual}
-        human: dict[str, np.ndarray] = {}
-        if traj.human:
-            pts = {
-                k: np.asarray(v)
-                for k, v in traj.human.items()
-                if np.ndim(v) == 2 and np.shape(v)[1] == 3
-            }
-            if pts:
-                base = traj.q[0, :2] if robot.free_flyer else np.zeros(2)
-                yaw = 0.0
-                if robot.free_flyer:
-                    R0 = pin.Quaternion(traj.q[0, 3:7]).toRotationMatrix()
-                    yaw = float(np.arctan2(R0[1, 0], R0[0, 0]))
-                human = place_beside(pts, base, yaw)
-        series = series or {}
-        with gui.add_folder("Timeline"):
-            slider = gui.add_slider("Frame", min=0, max=max(T - 1, 1), step=1, initial_value=0)
-            play = gui.add_button("Play / pause")
-            speed = gui.add_dropdown("Speed", ("0.25x", "0.5x", "1x", "2x"), initial_value="1x")
-        numbers = gui.add_markdown("")
-        state = {"playing": False}
-
-        @play.on_click
-        def _(_event: Any) -> None:
-            state["playing"] = not state["playing"]
-
-        tgt_handle = act_handle = bones = poly = com = None
-
-        def draw(k: int) -> None:
-            nonlocal tgt_handle, act_handle, bones, poly, com
-            k = int(min(max(k, 0), T - 1))
-            self.set_configuration(traj.q[k])
-            if targets:
-                P = np.array([v[k] for v in targets.values()], dtype=np.float32)
-                A = np.array([v[k] for v in actual.values()], dtype=np.float32) if actual else P
-                tgt_handle = scene.add_point_cloud(
-                    "/targets", P, (230, 40, 40), point_size=0.03, point_shape="circle"
-                )
-                act_handle = scene.add_point_cloud(
-                    "/actual", A, (40, 90, 230), point_size=0.02, point_shape="circle"
-                )
-            if human:
-                segs = skeleton_segments(human, min(k, len(next(iter(human.values()))) - 1))
-                if len(segs):
-                    bones = scene.add_line_segments(
-                        "/human", segs.astype(np.float32), (240, 140, 20), thickness=0.02
-                    )
-            if robot.free_flyer:
-                c = pin.centerOfMass(robot.model, self.data, traj.q[k])
-                com = scene.add_icosphere(
-                    "/com", radius=0.02, color=(30, 160, 60), position=(c[0], c[1], 0.002)
-                )
-                if traj.contacts is not None and traj.contacts.size:
-                    from .render import _support_polygon
-
-                    pin.updateFramePlacements(robot.model, self.data)
-                    hull = _support_polygon(robot, self.data, traj.contacts[k], traj.foot_names)
-                    if len(hull):
-                        ring = np.vstack([hull, hull[:1]])
-                        segs = np.stack(
-                            [
-                                np.c_[ring[:-1], np.full(len(hull), 0.003)],
-                                np.c_[ring[1:], np.full(len(hull), 0.003)],
-                            ],
-                            axis=1,
-                        )
-                        poly = scene.add_line_segments(
-                            "/support", segs.astype(np.float32), (30, 160, 60), thickness=0.008
-                        )
-            lines = [f"**t = {traj.t[k]:.2f} s** (frame {k + 1}/{T})", ""]
-            for name in targets:
-                if name in actual:
-                    e = np.linalg.norm(targets[name][k] - actual[name][k]) * 1e3
-                    lines.append(f"- {name}: {e:.1f} mm")
-            for key, label, scale, unit in (
-                ("min_distance", "min pair distance", 1e3, "mm"),
-                ("com_margin", "CoM margin", 1e3, "mm"),
-            ):
-                if key in series and k < len(series[key]) and np.isfinite(series[key][k]):
-                    lines.append(f"- {label}: {series[key][k] * scale:.1f} {unit}")
-            if traj.status is not None:
-                lines.append(f"- status: {traj.status[k]}")
-            numbers.content = "\n".join(lines)
-
-        @slider.on_update
-        def _(_event: Any) -> None:
-            draw(slider.value)
-
-        def loop() -> None:
-            dt = float(np.median(np.diff(traj.t))) if T > 1 else 0.01
-            last = time.perf_counter()
-            acc = 0.0
-            while not self._stop.is_set():
-                time.sleep(1 / 60)
-                now = time.perf_counter()
-                if state["playing"]:
-                    acc += (now - last) * float(speed.value.rstrip("x"))
-                    steps = int(acc / dt)
-                    if steps:
-                        acc -= steps * dt
-                        slider.value = (slider.value + steps) % T
-                last = now
-
-        draw(0)
-        th = threading.Thread(target=loop, daemon=True, name="qpretarget-viewer-playback")
+        replay = _RunReplay(self, traj, series or {})
+        replay.draw(0)
+        th = threading.Thread(target=replay.loop, daemon=True, name="qpretarget-viewer-playback")
         th.start()
         self._threads.append(th)
 
@@ -420,6 +313,128 @@ def _live_main(argv: list[str] | None = None) -> int:
         shm.close()
     sys.stdout.flush()
     return 0
+
+
+class _RunReplay:
+    """The timeline of :meth:`Viewer.show_run`: GUI, playback loop and drawing of one frame."""
+
+    def __init__(self, viewer: Viewer, traj: Any, series: dict[str, np.ndarray]) -> None:
+        self.viewer, self.traj, self.series = viewer, traj, series
+        self.T = len(traj.t)
+        self.targets = {
+            k: np.asarray(traj.targets[k]) for k in traj.task_names if k in traj.targets
+        }
+        self.actual = {k: np.asarray(traj.actual[k]) for k in traj.task_names if k in traj.actual}
+        self.human = (
+            beside_robot(traj.human, traj.q[0], viewer.robot.free_flyer) if traj.human else {}
+        )
+        gui = viewer.server.gui
+        with gui.add_folder("Timeline"):
+            self.slider = gui.add_slider(
+                "Frame", min=0, max=max(self.T - 1, 1), step=1, initial_value=0
+            )
+            play = gui.add_button("Play / pause")
+            self.speed = gui.add_dropdown(
+                "Speed", ("0.25x", "0.5x", "1x", "2x"), initial_value="1x"
+            )
+        self.numbers = gui.add_markdown("")
+        self.playing = False
+        self.handles: dict[str, Any] = {}  # the scene nodes drawn last
+
+        @play.on_click
+        def _(_event: Any) -> None:
+            self.playing = not self.playing
+
+        @self.slider.on_update
+        def _(_event: Any) -> None:
+            self.draw(self.slider.value)
+
+    def draw(self, k: int) -> None:
+        """Show frame ``k`` (clipped to the run)."""
+        k = int(min(max(k, 0), self.T - 1))
+        self.viewer.set_configuration(self.traj.q[k])
+        self._draw_points(k)
+        if self.human:
+            self._draw_human(k)
+        if self.viewer.robot.free_flyer:
+            self._draw_balance(k)
+        self.numbers.content = self._numbers(k)
+
+    def _draw_points(self, k: int) -> None:
+        """Task targets (red) and reached points (blue)."""
+        if not self.targets:
+            return
+        scene = self.viewer.server.scene
+        P = np.array([v[k] for v in self.targets.values()], dtype=np.float32)
+        A = np.array([v[k] for v in self.actual.values()], dtype=np.float32) if self.actual else P
+        self.handles["targets"] = scene.add_point_cloud(
+            "/targets", P, (230, 40, 40), point_size=0.03, point_shape="circle"
+        )
+        self.handles["actual"] = scene.add_point_cloud(
+            "/actual", A, (40, 90, 230), point_size=0.02, point_shape="circle"
+        )
+
+    def _draw_human(self, k: int) -> None:
+        """The human skeleton beside the robot."""
+        human = self.human
+        segs = skeleton_segments(human, min(k, len(next(iter(human.values()))) - 1))
+        if len(segs):
+            self.handles["human"] = self.viewer.server.scene.add_line_segments(
+                "/human", segs.astype(np.float32), (240, 140, 20), thickness=0.02
+            )
+
+    def _draw_balance(self, k: int) -> None:
+        """CoM ground projection and the support polygon of the feet in contact."""
+        viewer, traj = self.viewer, self.traj
+        robot, data, scene = viewer.robot, viewer.data, viewer.server.scene
+        c = pin.centerOfMass(robot.model, data, traj.q[k])
+        self.handles["com"] = scene.add_icosphere(
+            "/com", radius=0.02, color=(30, 160, 60), position=(c[0], c[1], 0.002)
+        )
+        if traj.contacts is not None and traj.contacts.size:
+            from .render import support_outline
+
+            pin.updateFramePlacements(robot.model, data)
+            segs = support_outline(robot, data, traj.contacts[k], traj.foot_names, 0.003)
+            if len(segs):
+                self.handles["support"] = scene.add_line_segments(
+                    "/support", segs.astype(np.float32), (30, 160, 60), thickness=0.008
+                )
+
+    def _numbers(self, k: int) -> str:
+        """Markdown: time, per-task error [mm], pair distance, CoM margin and status at ``k``."""
+        traj, series = self.traj, self.series
+        lines = [f"**t = {traj.t[k]:.2f} s** (frame {k + 1}/{self.T})", ""]
+        for name in self.targets:
+            if name in self.actual:
+                e = np.linalg.norm(self.targets[name][k] - self.actual[name][k]) * 1e3
+                lines.append(f"- {name}: {e:.1f} mm")
+        for key, label, scale, unit in (
+            ("min_distance", "min pair distance", 1e3, "mm"),
+            ("com_margin", "CoM margin", 1e3, "mm"),
+        ):
+            if key in series and k < len(series[key]) and np.isfinite(series[key][k]):
+                lines.append(f"- {label}: {series[key][k] * scale:.1f} {unit}")
+        if traj.status is not None:
+            lines.append(f"- status: {traj.status[k]}")
+        return "\n".join(lines)
+
+    def loop(self) -> None:
+        """Advance the slider in real time (times the chosen speed) while playing."""
+        traj, T = self.traj, self.T
+        dt = float(np.median(np.diff(traj.t))) if T > 1 else 0.01
+        last = time.perf_counter()
+        acc = 0.0
+        while not self.viewer._stop.is_set():
+            time.sleep(1 / 60)
+            now = time.perf_counter()
+            if self.playing:
+                acc += (now - last) * float(self.speed.value.rstrip("x"))
+                steps = int(acc / dt)
+                if steps:
+                    acc -= steps * dt
+                    self.slider.value = (self.slider.value + steps) % T
+            last = now
 
 
 class LiveViewer:
