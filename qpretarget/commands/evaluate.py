@@ -13,6 +13,11 @@ HELP = """examples:
       the same motion retargeted with the constraints off, shown beside (CRAC Fig. 3-4, 11)
   qpretarget evaluate run.npz -o report/ --no-figures --pairs left_wrist_yaw_link:torso_link
       metrics only, for the collision pairs given
+  qpretarget evaluate run.npz -o report/ --physics
+      also replay the run in MuJoCo (physics.json, physics.png): does the robot stay up, which
+      joints hit their torque limits, what a virtual root wrench had to add (docs/physics.md)
+  qpretarget evaluate run.npz -o report/ --physics --physics-gains unitree --no-assist
+      the vendor's PD gains, unassisted replay only
 """
 
 
@@ -48,6 +53,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--no-per-frame", action="store_true", help="leave per-frame arrays out of metrics.json"
     )
+    p.add_argument(
+        "--physics",
+        action="store_true",
+        help="replay the run in MuJoCo (needs the physics extra): physics.json and physics.png",
+    )
+    p.add_argument(
+        "--physics-gains",
+        default=None,
+        help="PD gain profile: stiff (default), unitree, beyondmimic (G1), generic",
+    )
+    p.add_argument("--physics-timestep", type=float, default=None, help="physics step [s]")
+    p.add_argument("--no-assist", action="store_true", help="skip the assisted replay")
     p.set_defaults(func=run)
 
 
@@ -106,9 +123,68 @@ def run(args: argparse.Namespace) -> int:
 
         written += list(write_figures(series, out, before=before, joints=args.joints).values())
     _print_summary(metrics)
+    if args.physics:
+        written += _physics(traj, args, out, metrics)
     print("wrote " + ", ".join(str(p) for p in written))
     return 0
 
+
+def _physics(traj: object, args: argparse.Namespace, out: Path, metrics: dict) -> list[Path]:
+    """Replay in MuJoCo; write physics.json (+ figure); add a summary to metrics.json."""
+    from ..fileio import write_atomic
+    from ..physics.metrics import dumps, summary_row
+    from ..physics.replay import check_run
+
+    m, free, helped = check_run(
+        traj, gains=args.physics_gains, timestep=args.physics_timestep, assisted=not args.no_assist
+    )
+    if not args.no_per_frame:
+        from ..physics.metrics import per_frame_series
+
+        m["per_frame"] = per_frame_series(free, helped)
+    text = dumps(m)
+    written = [write_atomic(out / "physics.json", lambda f: f.write(text), binary=False)]
+    metrics["physics"] = summary_row(m)
+    mtext = dumps_metrics(metrics)
+    write_atomic(out / "metrics.json", lambda f: f.write(mtext), binary=False)
+    if not args.no_figures:
+        from ..physics.plots import write_figure
+
+        written.append(write_figure(free, helped, out / "physics.png", title=str(args.run)))
+    _print_physics(m)
+    return written
+
+
+def dumps_metrics(metrics: dict) -> str:
+    """metrics.json text (the analysis module's strict JSON)."""
+    from ..analysis.metrics import dumps
+
+    return dumps(metrics)
+
+
+def _print_physics(m: dict) -> None:
+    """Print the headline numbers of physics.json."""
+    u = m["unassisted"]
+    sat = u["saturation"]
+    feet = u["feet"]
+    share = feet["weight_share_mean"]
+    lines = [
+        f"physics          {m['verdict']}: survived {u['survived_fraction'] * 100:.1f} % "
+        + ("" if u["fallen_at_s"] is None else f"(fell at {u['fallen_at_s']:.2f} s) ")
+        + f"with {m['model']['gains']} gains, {u['real_time_factor']:.1f}x real time",
+        f"  root error     p95 {u['root_position_error_mm']['p95']:.1f} mm, "
+        f"{u['root_orientation_error_deg']['p95']:.2f} deg; joint RMS "
+        f"{u['joint_tracking_rms_deg']['overall']:.2f} deg",
+        f"  saturation     {sat['frames']} frames ({sat['fraction'] * 100:.1f} %)",
+        "  feet share     " + ("-" if share is None else f"{share * 100:.1f} % of body weight"),
+    ]
+    if "assisted" in m:
+        a = m["assisted"]["assist"]
+        lines.append(
+            f"  assist         force p95 {a['force_bw_pct']['p95']:.1f} % BW, torque p95 "
+            f"{a['torque_Nm']['p95']:.1f} N m"
+        )
+    print("\n".join(lines))
 
 def _print_summary(m: dict) -> None:
     """Print the headline numbers of ``metrics.json``."""

@@ -1,0 +1,430 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Replay a retargeted run in MuJoCo with joint PD tracking, the floating base free.
+
+Each physics step (``h`` = the model's time step, a whole number of steps per run frame) every
+actuated joint gets
+
+    tau = clip(kp (q_ref - q) + kd (qdot_ref - qdot), -tau_max, tau_max)        (1)
+
+with ``q_ref`` linear between the run's frames and ``qdot_ref`` the run's joint velocity ``v``
+(the velocity the controller applied over the frame: the feed-forward). Nothing else acts: no
+balance controller, no gravity compensation. The floating base is free, so the robot stands,
+stumbles or falls on its own.
+
+The *assisted* replay adds a virtual wrench on the floating base that pulls it toward the
+reference base pose: a MuJoCo weld equality between the base and a mocap body moved along the
+reference, a soft constraint (``solref = (0.1 s, 1)``, ``solimp`` impedance 0.1) that the
+constraint solver integrates implicitly; soft, so the feet carry the weight when they can (on a
+clip that stands unassisted the weld still takes about 10 % of the weight at p95: that is the
+floor of this measure). Its constraint force
+``(f, n)`` is the effort the robot's own feet could not provide
+(:mod:`~qpretarget.physics.metrics` reports ``|f|`` as % of body weight and ``|n|``).
+
+The floor is placed at the lowest point of the robot's collision geometry in the first frame, so a
+run whose soles sit a few millimetres off z = 0 neither drops nor starts in penetration (the offset
+is reported). Deterministic: the same run and options give bit-identical series.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import QPRetargetError
+from .model import PhysicsModel, import_mujoco, set_configuration
+
+#: Standard gravity [m/s^2] (MuJoCo's default gravity vector is (0, 0, -9.81)).
+GRAVITY = 9.81
+
+
+class PhysicsInputError(QPRetargetError, ValueError):
+    """A run that cannot be replayed on the robot (joint count or names, bad samples)."""
+
+
+@dataclass
+class ReplaySeries:
+    """Per-frame series of one replay (frames after a fall are NaN / False).
+
+    Attributes:
+        t: frame times [s] (the run's).
+        assisted: the replay had the virtual root wrench.
+        simulated: frames simulated (the replay stops at the first fallen frame).
+        fallen_at: index of the first fallen frame, ``None`` if the robot stayed up.
+        pelvis_height, pelvis_height_ref: base height [m], simulated and reference.
+        tilt_deg: angle between the torso's vertical axis and the reference torso's [deg].
+        root_pos_err: base position error [m]; root_ori_err_deg: base orientation error [deg].
+        joint_err: ``q - q_ref`` per joint [rad], shape (T, n).
+        saturated: (T, n) the joint's PD torque hit its limit in any step of the frame.
+        foot_force: (T, F) mean normal floor force on each foot over the frame [N].
+        other_force: (T,) mean normal floor force on the rest of the body [N].
+        assist_force, assist_torque: (T,) mean norm of the assisting weld's force [N] and
+            torque [N m].
+        ref_contacts: (T, F) the run's supporting feet.
+        floor_height: floor placement [m] (lowest collision point in the first frame).
+        wall_time_s: time the replay took; sim_time_s: simulated time.
+    """
+
+    t: np.ndarray
+    assisted: bool
+    simulated: int
+    fallen_at: int | None
+    pelvis_height: np.ndarray
+    pelvis_height_ref: np.ndarray
+    tilt_deg: np.ndarray
+    root_pos_err: np.ndarray
+    root_ori_err_deg: np.ndarray
+    joint_err: np.ndarray
+    saturated: np.ndarray
+    foot_force: np.ndarray
+    other_force: np.ndarray
+    assist_force: np.ndarray
+    assist_torque: np.ndarray
+    ref_contacts: np.ndarray
+    joint_names: list[str]
+    foot_names: list[str]
+    mass: float
+    floor_height: float
+    wall_time_s: float = 0.0
+    sim_time_s: float = 0.0
+    contacts_assumed: bool = False
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def weight(self) -> float:
+        """Body weight m g [N]."""
+        return self.mass * GRAVITY
+
+
+# --------------------------------------------------------------------------- quaternion helpers
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of quaternions ``w x y z``."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def _quat_log(q: np.ndarray) -> np.ndarray:
+    """Rotation vector of a unit quaternion ``w x y z`` (shortest rotation)."""
+    if q[0] < 0.0:
+        q = -q
+    s = float(np.linalg.norm(q[1:]))
+    if s < 1e-12:
+        return 2.0 * q[1:]
+    return (2.0 * math.atan2(s, q[0]) / s) * q[1:]
+
+
+def _quat_to_mat(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _wxyz(root: np.ndarray) -> np.ndarray:
+    """Pinocchio free-flyer quaternion (``qx qy qz qw`` at ``root[3:7]``) as ``w x y z``."""
+    q = np.array([root[6], root[3], root[4], root[5]], dtype=float)
+    return q / np.linalg.norm(q)
+
+
+# ------------------------------------------------------------------------------- validation
+def joint_columns(traj: Any, pm: PhysicsModel) -> np.ndarray:
+    """Columns of ``traj.q[:, 7:]`` holding each joint of ``pm.joint_names`` (matched by name).
+
+    Raises:
+        PhysicsInputError: the run's joint count, names or shape do not match the robot.
+    """
+    q = np.asarray(traj.q)
+    n = len(pm.joint_names)
+    names = list(traj.joint_names)
+    if q.ndim != 2 or len(q) < 2:
+        raise PhysicsInputError(
+            f"the run holds {0 if q.ndim != 2 else len(q)} frame(s) of q; the physics replay "
+            "needs at least 2."
+        )
+    if len(names) != n or q.shape[1] != 7 + n:
+        raise PhysicsInputError(
+            f"the run has {len(names)} joints (q of width {q.shape[1]}) but robot "
+            f"{pm.robot_name!r} has {n} actuated joints (q of width {7 + n} with the free "
+            "flyer): was it retargeted to another robot? Replay it with that robot's config."
+        )
+    missing = [j for j in pm.joint_names if j not in names]
+    if missing:
+        unknown = [j for j in names if j not in pm.joint_names]
+        raise PhysicsInputError(
+            f"the run's joints do not match robot {pm.robot_name!r}: missing {missing[:5]}, "
+            f"unknown {unknown[:5]}."
+        )
+    if not np.all(np.isfinite(q)):
+        bad = int(np.argwhere(~np.isfinite(q))[0, 0])
+        raise PhysicsInputError(f"the run's q has a non-finite value at frame {bad}.")
+    t = np.asarray(traj.t, float)
+    if len(t) != len(q) or np.any(np.diff(t) <= 0):
+        raise PhysicsInputError("the run's time axis t must increase and match q's frames.")
+    return np.array([names.index(j) for j in pm.joint_names], dtype=int)
+
+
+def _floor_height(pm: PhysicsModel, d: Any, mujoco: Any) -> float:
+    """Height of the lowest point of the robot's collision geometry in ``d``'s configuration."""
+    m = pm.model
+    m.geom_pos[pm.floor_geom] = 0.0
+    mujoco.mj_forward(m, d)
+    lowest = math.inf
+    fromto = np.zeros(6)
+    for g in range(m.ngeom):
+        if g == pm.floor_geom or m.geom_contype[g] == 0:
+            continue
+        dist = mujoco.mj_geomDistance(m, d, g, pm.floor_geom, 10.0, fromto)
+        lowest = min(lowest, float(dist))
+    return 0.0 if not math.isfinite(lowest) else lowest
+
+
+# ------------------------------------------------------------------------------------ replay
+def replay_run(
+    traj: Any,
+    pm: PhysicsModel,
+    *,
+    assisted: bool = False,
+    stop_on_fall: bool = True,
+    fall_height: float | None = None,
+    fall_tilt_deg: float | None = None,
+) -> ReplaySeries:
+    """Replay ``traj`` (a :class:`~qpretarget.trajectory.RobotTrajectory`) on ``pm``.
+
+    Args:
+        traj: the run; its joints are matched to the model's by name.
+        pm: the model (:func:`~qpretarget.physics.model.build_physics_model`).
+        assisted: weld the base to the reference base pose (the virtual root wrench).
+        stop_on_fall: stop at the first fallen frame (frames after it are NaN).
+        fall_height: fall when the pelvis is this far below the reference's [m] (default
+            :data:`~qpretarget.physics.metrics.FALL_HEIGHT_M`).
+        fall_tilt_deg: fall when the torso tilts this far from the reference's [deg] (default
+            :data:`~qpretarget.physics.metrics.FALL_TILT_DEG`).
+
+    Raises:
+        PhysicsInputError: the run does not match the robot (before any simulation).
+    """
+    from .metrics import FALL_HEIGHT_M, FALL_TILT_DEG
+
+    fall_height = FALL_HEIGHT_M if fall_height is None else fall_height
+    fall_tilt = math.radians(FALL_TILT_DEG if fall_tilt_deg is None else fall_tilt_deg)
+    cols = joint_columns(traj, pm)
+    mujoco = import_mujoco()
+    m = pm.model
+    t = np.asarray(traj.t, float)
+    T, n, F = len(t), len(pm.joint_names), len(pm.foot_names)
+    q_all = np.asarray(traj.q, float)
+    v_all = np.asarray(traj.v, float)
+    root_ref = q_all[:, :7]
+    qj_ref = q_all[:, 7:][:, cols]
+    vj_ref = v_all[:, 6:][:, cols] if v_all.shape == (T, 6 + n) else np.zeros((T, n))
+    vb_ref = v_all[:, :6] if v_all.shape == (T, 6 + n) else np.zeros((T, 6))
+    contacts = np.asarray(traj.contacts, bool) if traj.contacts is not None else None
+    ref_contacts = np.ones((T, F), bool)
+    contacts_assumed = True
+    if contacts is not None and contacts.shape == (T, len(traj.foot_names)) and F:
+        ref_contacts = np.zeros((T, F), bool)
+        for i, name in enumerate(pm.foot_names):
+            if name in traj.foot_names:
+                ref_contacts[:, i] = contacts[:, list(traj.foot_names).index(name)]
+        contacts_assumed = False
+
+    pm.apply_gains()
+    d = mujoco.MjData(m)
+    dref = mujoco.MjData(m)
+    d.eq_active[pm.assist_eq] = 1 if assisted else 0
+    mocap = pm.assist_mocap
+    eq_type = mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    set_configuration(d, root_ref[0], qj_ref[0], pm.qpos_adr)
+    floor = _floor_height(pm, d, mujoco)
+    m.geom_pos[pm.floor_geom] = [0.0, 0.0, floor]
+    R0 = _quat_to_mat(_wxyz(root_ref[0]))
+    d.qvel[:] = 0.0
+    d.qvel[0:3] = R0 @ vb_ref[0, :3]
+    d.qvel[3:6] = vb_ref[0, 3:6]
+    d.qvel[pm.dof_adr] = vj_ref[0]
+    d.mocap_pos[mocap] = root_ref[0, :3]
+    d.mocap_quat[mocap] = _wxyz(root_ref[0])
+    mujoco.mj_forward(m, d)
+    mass = pm.mass
+
+    nan = np.full(T, np.nan)
+    pelvis_h, pelvis_h_ref = nan.copy(), root_ref[:, 2].copy()
+    tilt, pos_err, ori_err = nan.copy(), nan.copy(), nan.copy()
+    joint_err = np.full((T, n), np.nan)
+    saturated = np.zeros((T, n), bool)
+    foot_force = np.full((T, F), np.nan)
+    other_force = nan.copy()
+    assist_f, assist_n = nan.copy(), nan.copy()
+    pelvis_h[0], tilt[0], pos_err[0], ori_err[0] = d.qpos[2], 0.0, 0.0, 0.0
+    joint_err[0] = d.qpos[pm.qpos_adr] - qj_ref[0]
+    foot_force[0], other_force[0] = np.nan, np.nan
+    kp, kd, effort = pm.kp, pm.kd, pm.effort
+    ratio = kd / kp
+    qadr, dadr = pm.qpos_adr, pm.dof_adr
+    h0 = float(m.opt.timestep)
+    torso = pm.torso_body
+    foot_of_body, geom_body = pm.foot_of_body, m.geom_bodyid
+    f6 = np.zeros(6)
+    fallen_at: int | None = None
+    simulated = 1
+    t0 = time.perf_counter()
+    for k in range(1, T):
+        dt = float(t[k] - t[k - 1])
+        n_sub = max(1, int(round(dt / h0)))
+        m.opt.timestep = dt / n_sub
+        q0, q1 = qj_ref[k - 1], qj_ref[k]
+        vff = vj_ref[k]
+        p0, p1 = root_ref[k - 1, :3], root_ref[k, :3]
+        r0, r1 = _wxyz(root_ref[k - 1]), _wxyz(root_ref[k])
+        if float(np.dot(r0, r1)) < 0.0:
+            r1 = -r1
+        sat = np.zeros(n, bool)
+        ff = np.zeros(F)
+        fo = 0.0
+        af = an = 0.0
+        for j in range(n_sub):
+            a = j / n_sub
+            qr = q0 + a * (q1 - q0)
+            u = kp * (qr - d.qpos[qadr]) + kd * (vff - d.qvel[dadr])  # eq. 1 before the clamp
+            sat |= np.abs(u) >= effort
+            d.ctrl[:] = qr + ratio * vff  # the position actuators apply eq. 1, clamped
+            if assisted:
+                rr = r0 + a * (r1 - r0)
+                d.mocap_pos[mocap] = p0 + a * (p1 - p0)
+                d.mocap_quat[mocap] = rr / np.linalg.norm(rr)
+            mujoco.mj_step(m, d)
+            if assisted:  # the weld's constraint force: 3 force rows, 3 torque rows
+                rows = (d.efc_type == eq_type) & (d.efc_id == pm.assist_eq)
+                w = d.efc_force[rows]
+                if len(w) == 6:
+                    af += float(np.linalg.norm(w[:3]))
+                    an += float(np.linalg.norm(w[3:]))
+            for c in range(d.ncon):
+                con = d.contact[c]
+                g1, g2 = int(con.geom1), int(con.geom2)
+                if g1 == pm.floor_geom:
+                    other = g2
+                elif g2 == pm.floor_geom:
+                    other = g1
+                else:
+                    continue
+                mujoco.mj_contactForce(m, d, c, f6)
+                foot = foot_of_body[geom_body[other]]
+                if foot >= 0:
+                    ff[foot] += f6[0]
+                else:
+                    fo += f6[0]
+        m.opt.timestep = h0
+        simulated = k + 1
+        saturated[k] = sat
+        foot_force[k] = ff / n_sub
+        other_force[k] = fo / n_sub
+        if assisted:
+            assist_f[k], assist_n[k] = af / n_sub, an / n_sub
+        qb = d.qpos[3:7]
+        pelvis_h[k] = d.qpos[2]
+        pos_err[k] = float(np.linalg.norm(d.qpos[0:3] - p1))
+        conj = np.array([qb[0], -qb[1], -qb[2], -qb[3]])
+        ori_err[k] = math.degrees(float(np.linalg.norm(_quat_log(_quat_mul(conj, r1)))))
+        joint_err[k] = d.qpos[qadr] - q1
+        # torso's vertical axis, simulated and reference (FK of the reference frame)
+        set_configuration(dref, root_ref[k], q1, qadr)
+        mujoco.mj_kinematics(m, dref)
+        mujoco.mj_kinematics(m, d)  # after mj_step, xmat still holds the step's start
+        z_sim = d.xmat[torso].reshape(3, 3)[:, 2]
+        z_ref = dref.xmat[torso].reshape(3, 3)[:, 2]
+        tilt[k] = math.degrees(math.acos(max(-1.0, min(1.0, float(np.dot(z_sim, z_ref))))))
+        down = pelvis_h_ref[k] - pelvis_h[k] > fall_height
+        if fallen_at is None and (down or math.radians(tilt[k]) > fall_tilt):
+            fallen_at = k
+            if stop_on_fall:
+                break
+    wall = time.perf_counter() - t0
+    return ReplaySeries(
+        t=t,
+        assisted=assisted,
+        simulated=simulated,
+        fallen_at=fallen_at,
+        pelvis_height=pelvis_h,
+        pelvis_height_ref=pelvis_h_ref,
+        tilt_deg=tilt,
+        root_pos_err=pos_err,
+        root_ori_err_deg=ori_err,
+        joint_err=joint_err,
+        saturated=saturated,
+        foot_force=foot_force,
+        other_force=other_force,
+        assist_force=assist_f,
+        assist_torque=assist_n,
+        ref_contacts=ref_contacts,
+        joint_names=list(pm.joint_names),
+        foot_names=list(pm.foot_names),
+        mass=mass,
+        floor_height=floor,
+        wall_time_s=wall,
+        sim_time_s=float(t[simulated - 1] - t[0]),
+        contacts_assumed=contacts_assumed,
+    )
+
+
+def robot_of_run(traj: Any) -> Any:
+    """The :class:`~qpretarget.robot.RobotModel` a run was retargeted with (from its config)."""
+    from ..robot import load_robot
+    from ..yamlio import load_yaml
+
+    spec: Any = traj.robot
+    try:
+        cfg = load_yaml(traj.config_yaml) if traj.config_yaml else None
+    except Exception:  # noqa: BLE001  (a run without a readable config: use its robot name)
+        cfg = None
+    if isinstance(cfg, dict) and "robot" in cfg:
+        spec = cfg["robot"]
+    return load_robot(spec)
+
+
+def check_run(
+    traj: Any,
+    *,
+    robot: Any = None,
+    pm: PhysicsModel | None = None,
+    gains: str | None = None,
+    timestep: float | None = None,
+    assisted: bool = True,
+) -> tuple[dict[str, Any], ReplaySeries, ReplaySeries | None]:
+    """Build the model, replay the run unassisted (and assisted), return the metrics.
+
+    Returns:
+        ``(metrics, unassisted series, assisted series or None)``; metrics as
+        :func:`~qpretarget.physics.metrics.summarize`.
+
+    Raises:
+        PhysicsInputError: the run does not match the robot (checked before any simulation).
+        PhysicsModelError: the URDF does not convert.
+    """
+    from .metrics import summarize
+    from .model import DEFAULT_TIMESTEP, build_physics_model
+
+    if pm is None:
+        robot = robot if robot is not None else robot_of_run(traj)
+        pm = build_physics_model(
+            robot, gains=gains, timestep=timestep if timestep is not None else DEFAULT_TIMESTEP
+        )
+    joint_columns(traj, pm)
+    free = replay_run(traj, pm, assisted=False)
+    helped = replay_run(traj, pm, assisted=True) if assisted else None
+    return summarize(free, helped, pm), free, helped
