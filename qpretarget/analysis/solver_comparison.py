@@ -263,67 +263,84 @@ def record_run(
     """
     controller.reset()
     dt = controller.dt if dt is None else float(dt)
-    frame_tasks = {
-        n: t for n, t in controller.tasks.items() if isinstance(t, FrameTask) and t.has_position
-    }
-    pos_tasks = list(frame_tasks)
-    qs, vs, ts, statuses, solve = (
-        [controller.q.copy()],
-        [np.zeros(controller.robot.nv)],
-        [0.0],
-        ["ok"],
-        [0.0],
-    )
-    tgt = {n: [t.position_target.copy()] for n, t in frame_tasks.items()}
-    act = {n: [t.current_pose(controller.state)[0].copy()] for n, t in frame_tasks.items()}
-    taus: list[np.ndarray] = []
-    contact = next((c for c in controller.constraints if isinstance(c, Contacts)), None)
-    feet = list(contact.names) if contact is not None else []
-
-    def active() -> list[bool]:
-        on = set(contact.active_feet) if contact is not None else set()
-        return [f in on for f in feet]
-
-    contacts = [active()]
+    recorder = _RunRecorder(controller)
     for target in targets:
         res = controller.step(target, dt=dt)
         if on_step is not None:
             on_step(res)
-        qs.append(np.array(res.q))
-        vs.append(np.array(res.v))
-        ts.append(res.t)
-        statuses.append(res.status)
-        solve.append(res.solve_time)
+        recorder.add(res)
+    return recorder.trajectory(meta)
+
+
+class _RunRecorder:
+    """Samples of a run, the first being the state before the first tick (:func:`record_run`)."""
+
+    def __init__(self, controller: Controller) -> None:
+        self.controller = controller
+        self.frame_tasks = {
+            n: t for n, t in controller.tasks.items() if isinstance(t, FrameTask) and t.has_position
+        }
+        self.qs = [controller.q.copy()]
+        self.vs = [np.zeros(controller.robot.nv)]
+        self.ts = [0.0]
+        self.statuses = ["ok"]
+        self.solve = [0.0]
+        self.taus: list[np.ndarray] = []
+        self.tgt = {n: [t.position_target.copy()] for n, t in self.frame_tasks.items()}
+        self.act = {
+            n: [t.current_pose(controller.state)[0].copy()] for n, t in self.frame_tasks.items()
+        }
+        self.contact = next((c for c in controller.constraints if isinstance(c, Contacts)), None)
+        self.feet = list(self.contact.names) if self.contact is not None else []
+        self.contacts = [self._active()]
+
+    def _active(self) -> list[bool]:
+        """Per foot of the ``contacts`` constraint, whether it supports now."""
+        on = set(self.contact.active_feet) if self.contact is not None else set()
+        return [f in on for f in self.feet]
+
+    def add(self, res: Any) -> None:
+        """Record the result of one tick and the task targets and positions after it."""
+        self.qs.append(np.array(res.q))
+        self.vs.append(np.array(res.v))
+        self.ts.append(res.t)
+        self.statuses.append(res.status)
+        self.solve.append(res.solve_time)
         if res.tau is not None:
-            taus.append(np.array(res.tau))
-        contacts.append(active())
-        for n, task in frame_tasks.items():
-            tgt[n].append(task.position_target.copy())
-            act[n].append(task.current_pose(controller.state)[0].copy())
-    tau = None
-    if taus and len(taus) == len(qs) - 1:
-        tau = np.vstack([taus[0], *taus])  # sample 0 repeats the first tick's torques
-    return RobotTrajectory(
-        t=np.asarray(ts),
-        q=np.asarray(qs),
-        v=np.asarray(vs),
-        joint_names=list(controller.robot.joint_names),
-        robot=controller.robot.name,
-        config_yaml=controller.config_yaml,
-        task_names=pos_tasks,
-        targets={n: np.asarray(v) for n, v in tgt.items()},
-        actual={n: np.asarray(v) for n, v in act.items()},
-        contacts=np.asarray(contacts, bool).reshape(len(qs), len(feet)),
-        foot_names=feet,
-        status=np.asarray(statuses),
-        solve_time=np.asarray(solve),
-        tau=tau,
-        meta={
-            "config_name": controller.config.get("name", ""),
-            "root_nq": controller.robot.root_nq,
-            **dict(meta or {}),
-        },
-    )
+            self.taus.append(np.array(res.tau))
+        self.contacts.append(self._active())
+        state = self.controller.state
+        for n, task in self.frame_tasks.items():
+            self.tgt[n].append(task.position_target.copy())
+            self.act[n].append(task.current_pose(state)[0].copy())
+
+    def trajectory(self, meta: Mapping[str, Any] | None) -> RobotTrajectory:
+        """The recorded run (torques only when every tick gave them)."""
+        controller, qs, taus = self.controller, self.qs, self.taus
+        tau = None
+        if taus and len(taus) == len(qs) - 1:
+            tau = np.vstack([taus[0], *taus])  # sample 0 repeats the first tick's torques
+        return RobotTrajectory(
+            t=np.asarray(self.ts),
+            q=np.asarray(qs),
+            v=np.asarray(self.vs),
+            joint_names=list(controller.robot.joint_names),
+            robot=controller.robot.name,
+            config_yaml=controller.config_yaml,
+            task_names=list(self.frame_tasks),
+            targets={n: np.asarray(v) for n, v in self.tgt.items()},
+            actual={n: np.asarray(v) for n, v in self.act.items()},
+            contacts=np.asarray(self.contacts, bool).reshape(len(qs), len(self.feet)),
+            foot_names=self.feet,
+            status=np.asarray(self.statuses),
+            solve_time=np.asarray(self.solve),
+            tau=tau,
+            meta={
+                "config_name": controller.config.get("name", ""),
+                "root_nq": controller.robot.root_nq,
+                **dict(meta or {}),
+            },
+        )
 
 
 # ---------------------------------------------------------------------------------- comparison
