@@ -1,0 +1,54 @@
+"""Shared fixtures of the physics tests: one short retargeted G1 run (real clip, real solver)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("mujoco")
+
+#: Static-balance config: configs/g1_whole_body_static.yaml when present, else g1_whole_body.yaml
+#: (both feet planted, CoM over the soles); the start ramp is lengthened to 2 s because the default
+#: 0.5 s ramp moves the CoM 6 cm forward and stops it within 0.25 s, which puts the ZMP past the
+#: toes (docs/physics.md).
+RAMP = "  calibration: {frames: 1, ramp_time: 2.0}\n"
+
+
+def static_config(configs_dir: Path, tmp: Path) -> Path:
+    base = configs_dir / "g1_whole_body_static.yaml"
+    if not base.is_file():
+        base = configs_dir / "g1_whole_body.yaml"
+    lines = base.read_text(encoding="utf-8").splitlines(keepends=True)
+    out = []
+    for line in lines:
+        if line.startswith("  calibration:"):
+            continue
+        out.append(line)
+        if line.startswith("retarget:"):
+            out.append(RAMP)
+    path = tmp / "g1_static_slow_ramp.yaml"
+    path.write_text("".join(out), encoding="utf-8")
+    return path
+
+
+@pytest.fixture(scope="session")
+def drink_run(tmp_path_factory, configs_dir, mocap_dir) -> Path:
+    """CMU 14_37 (drink soda), first 3 s, retargeted to the G1 with the static-balance config."""
+    from qpretarget.cli import main
+
+    tmp = tmp_path_factory.mktemp("physics")
+    cfg = static_config(configs_dir, tmp)
+    out = tmp / "drink.npz"
+    clip = mocap_dir / "cmu_14_37_drink_soda.bvh"
+    assert main(["retarget", str(cfg), str(clip), "-o", str(out), "--end", "3.0", "--quiet"]) == 0
+    return out
+
+
+@pytest.fixture(scope="session")
+def g1_physics():
+    from qpretarget.physics.model import build_physics_model
+    from qpretarget.robot import RobotModel
+
+    robot = RobotModel.from_name("g1")
+    return robot, build_physics_model(robot)
