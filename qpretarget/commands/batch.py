@@ -13,6 +13,7 @@ HELP = """examples:
   qpretarget batch configs/g1_whole_body.yaml 'mocap/**/*.bvh' -o out --workers 2
   qpretarget batch configs/g1_whole_body.yaml mocap/ -o out --engine ray            local Ray
   qpretarget batch configs/g1_whole_body.yaml mocap/ -o out --engine ray --address auto   cluster
+  qpretarget batch configs/g1_whole_body.yaml mocap/ -o out --physics   + MuJoCo replay per clip
 
 One output per clip (folders mirrored under OUT_DIR), summary.csv and summary.json in OUT_DIR.
 A clip whose outputs are current (same config, options and version) is skipped; --force redoes
@@ -41,6 +42,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--address", default=None, help="Ray cluster address (default: start one)")
     p.add_argument("--force", action="store_true", help="redo clips whose outputs are current")
     p.add_argument("--no-audit", action="store_true", help="skip the all-pairs collision audit")
+    p.add_argument(
+        "--physics",
+        action="store_true",
+        help="replay each clip in MuJoCo (physics extra): physics/* summary columns",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -66,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"the output folder {args.output!r} is not writable.")
     jobs = make_jobs(
         args.config, args.inputs, args.output, formats=formats, fps=args.fps,
-        force=args.force, audit=not args.no_audit,
+        force=args.force, audit=not args.no_audit, physics=args.physics,
     )  # fmt: skip
     results = run_batch(
         jobs, engine=args.engine, workers=args.workers, address=args.address,

@@ -63,6 +63,7 @@ class ClipJob:
     fps: float | None
     force: bool = False
     audit: bool = True
+    physics: bool = False  # replay in MuJoCo: physics/<column> summary columns (docs/physics.md)
 
 
 @dataclass
@@ -83,6 +84,7 @@ class ClipResult:
     outputs: list[str] = field(default_factory=list)
     error: str = ""
     rmse_mm: dict[str, float] = field(default_factory=dict)
+    physics: dict[str, Any] = field(default_factory=dict)
 
 
 # ------------------------------------------------------------------------------------ inputs
@@ -131,6 +133,7 @@ def make_jobs(
     fps: float | None,
     force: bool = False,
     audit: bool = True,
+    physics: bool = False,
 ) -> list[ClipJob]:
     """One :class:`ClipJob` per motion file, outputs under ``out_dir`` mirroring the inputs."""
     config = Path(config)
@@ -140,6 +143,8 @@ def make_jobs(
     if out.exists() and not out.is_dir():
         raise ConfigError(f"output folder {str(out)!r} is a file; give a folder with -o.")
     options = {"formats": sorted(formats), "fps": fps, "audit": audit, "version": _version()}
+    if physics:
+        options["physics"] = True
     sha = hashlib.sha256(config.read_bytes() + json.dumps(options).encode()).hexdigest()
     jobs = []
     for clip, root in discover_inputs(inputs):
@@ -147,8 +152,9 @@ def make_jobs(
         stem = out / rel.parent / rel.stem
         jobs.append(
             ClipJob(
-                str(clip), str(stem), str(config.resolve()), sha, tuple(formats), fps, force, audit
-            )
+                str(clip), str(stem), str(config.resolve()), sha, tuple(formats), fps, force, audit,
+                physics,
+            )  # fmt: skip
         )
     return jobs
 
@@ -249,6 +255,11 @@ def _retarget_and_export(job: ClipJob) -> ClipResult:
         audit = audit_self_collision(controller.robot, np.asarray(run.q), stride=2)
         row.penetrating_frames = audit.penetrating_frames
         row.min_pair_distance_mm = audit.min_distance_mm
+    if job.physics:
+        from ..physics.metrics import summary_row
+        from ..physics.replay import check_run
+
+        row.physics = summary_row(check_run(run, robot=controller.robot)[0])
     manifest = {"config_sha256": job.config_sha256, "outputs": row.outputs, "row": asdict(row)}
     write_atomic(_manifest_path(job), lambda f: f.write(json.dumps(manifest)), binary=False)
     return row
@@ -334,10 +345,14 @@ def summary_rows(results: Iterable[ClipResult]) -> tuple[list[str], list[dict[st
     """Columns and rows of the summary table (per-task RMSE columns after the fixed ones)."""
     results = list(results)
     tasks = sorted({k for r in results for k in r.rmse_mm})
-    cols = list(SUMMARY_COLUMNS[:-2]) + [f"rmse_mm/{t}" for t in tasks] + ["outputs", "error"]
+    phys = [k for k in dict.fromkeys(k for r in results for k in r.physics)]
+    cols = list(SUMMARY_COLUMNS[:-2]) + [f"rmse_mm/{t}" for t in tasks]
+    cols += [f"physics/{k}" for k in phys] + ["outputs", "error"]
     rows = []
     for r in results:
         d = asdict(r)
+        ph = d.pop("physics")
+        d.update({f"physics/{k}": ph.get(k, math.nan) for k in phys})
         rm = d.pop("rmse_mm")
         d["outputs"] = ";".join(d["outputs"])
         d.update({f"rmse_mm/{t}": rm.get(t, math.nan) for t in tasks})

@@ -1,0 +1,30 @@
+"""`qpretarget evaluate --physics` writes physics.json; the batch summary gets physics columns."""
+
+from __future__ import annotations
+
+import json
+import math
+
+from qpretarget.cli import main
+
+
+def test_evaluate_physics(drink_run, tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main(["evaluate", str(drink_run), "-o", str(out), "--physics", "--no-figures"]) == 0
+    m = json.loads((out / "physics.json").read_text())
+    assert m["verdict"] == "ok" and m["unassisted"]["survived_fraction"] == 1.0
+    assert len(m["per_frame"]["pelvis_height_m"]) == len(m["per_frame"]["t"])
+    assert json.loads((out / "metrics.json").read_text())["physics"]["verdict"] == "ok"
+    assert "physics          ok: survived 100.0 %" in capsys.readouterr().out
+
+
+def test_batch_summary_physics_columns():
+    from qpretarget.dataset.batch import ClipResult, summary_rows
+
+    rows = [
+        ClipResult("a.bvh", "ok", physics={"verdict": "ok", "survived": 1.0}),
+        ClipResult("b.bvh", "failed"),
+    ]
+    cols, table = summary_rows(rows)
+    assert "physics/verdict" in cols and "physics/survived" in cols
+    assert table[0]["physics/survived"] == 1.0 and math.isnan(table[1]["physics/survived"])
