@@ -12,6 +12,7 @@ written once per skeleton or marker set; the format is documented in ``docs/moti
       waist: root             # one joint / marker / frame
       head: [head, head_end]  # mean of several
       left_hand: {from: lwrist, offset: [0.0, 0.1, 0.0]}   # offset in the joint frame [m]
+      right_hand: {extend: [RightForeArm, RightHand], by: 0.5}  # b + 0.5 (b - a)
     orientations:             # optional: name -> joint whose world rotation is used
       torso: thorax
 
@@ -94,10 +95,15 @@ class KeypointSource:
         points: Joint, marker or frame names; the key-point is their mean.
         offset: Optional ``(3,)`` offset in [m] in the frame of the single source point,
             added after rotating by that point's orientation.
+        extend: With two points ``(a, b)``: the key-point is :math:`b + k (b - a)`, past ``b``
+            along the segment from ``a`` by ``k`` times its length (YAML
+            ``{extend: [a, b], by: k}``): a hand key-point past the wrist along the forearm for
+            skeletons without a hand bone.
     """
 
     points: tuple[str, ...]
     offset: tuple[float, float, float] | None = None
+    extend: float | None = None
 
 
 @dataclass(frozen=True)
@@ -155,6 +161,10 @@ class KeypointMap:
         out: dict[str, np.ndarray] = {}
         for keypoint, source in self.keypoints.items():
             points = [np.asarray(position_of(p), dtype=float) for p in source.points]
+            if source.extend is not None:
+                a, b = points
+                out[keypoint] = b + source.extend * (b - a)
+                continue
             position = points[0].copy() if len(points) == 1 else np.mean(points, axis=0)
             if source.offset is not None:
                 if rotation_of is None:
@@ -289,6 +299,8 @@ def _parse_source(
     fail: Callable[[tuple[str, ...], str], KeypointMapError],
 ) -> KeypointSource:
     offset = None
+    if isinstance(entry, Mapping) and "extend" in entry:
+        return _parse_extension(entry, keys, fail)
     if isinstance(entry, Mapping):
         unknown = [k for k in entry if k not in ("from", "offset")]
         if unknown or "from" not in entry:
@@ -320,6 +332,29 @@ def _parse_source(
     if offset is not None and len(points) != 1:
         raise fail(keys, "an offset needs exactly one source point (its frame gives the axes)")
     return KeypointSource(points=tuple(points), offset=offset)
+
+
+def _parse_extension(
+    entry: Mapping[str, Any],
+    keys: tuple[str, ...],
+    fail: Callable[[tuple[str, ...], str], KeypointMapError],
+) -> KeypointSource:
+    """``{extend: [a, b], by: k}``: the point ``b + k (b - a)``."""
+    unknown = [k for k in entry if k not in ("extend", "by")]
+    if unknown or "by" not in entry:
+        raise fail(keys, f"expected {{extend: [a, b], by: k}}, found keys {list(entry)}")
+    points = entry["extend"]
+    if (
+        not isinstance(points, list)
+        or len(points) != 2
+        or not all(isinstance(p, str) and p for p in points)
+        or points[0] == points[1]
+    ):
+        raise fail(keys + ("extend",), f"expected two different names [a, b], found {points!r}")
+    by = entry["by"]
+    if isinstance(by, bool) or not isinstance(by, (int, float)) or not np.isfinite(by):
+        raise fail(keys + ("by",), f"expected a finite number, found {by!r}")
+    return KeypointSource(points=(points[0], points[1]), extend=float(by))
 
 
 def _key_lines(text: str) -> dict[tuple[str, ...], int]:

@@ -54,6 +54,7 @@ def test_bundled_maps_are_listed():
         "mvn_bvh",
         "opensim_walking",
         "pyomeca_upper_limb",
+        "smpl",
     ]
 
 

@@ -54,9 +54,12 @@ def test_csv_with_smpl_names_picks_the_smpl_map_and_retargets(tmp_path, walk, re
     m = load_motion(path)
     assert guess_keypoint_map(m).name == "smpl"
     np.testing.assert_allclose(m.positions, P[:, keep], atol=1e-9)  # 9 printed decimals
-    # The same points under key-point names (SMPL has no hand joint: hands are the wrists).
+    # The same points under key-point names (SMPL has no hand joint: the map extends the
+    # forearm past the wrist by half its length).
     kp = {names[i]: m.positions[:, j] for j, i in enumerate(keep)}
-    kp["left_hand"], kp["right_hand"] = kp["left_wrist"], kp["right_wrist"]
+    for s in ("left", "right"):
+        w, e = kp[f"{s}_wrist"], kp[f"{s}_elbow"]
+        kp[f"{s}_hand"] = w + 0.5 * (w - e)
     same = HumanMotion(
         t=m.t, names=tuple(kp), positions=np.stack(list(kp.values()), axis=1),
         parents=(-1,) * len(kp), rate=m.rate, source="key-point names",
