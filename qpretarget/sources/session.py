@@ -158,6 +158,7 @@ class LiveSession:
         self._overtaken: set[int] = set()
         self._status_mark: tuple[float, int] | None = None
         self._latency: list[float] = []
+        self._step_time: list[float] = []
         self._rec: dict[str, list[Any]] = collections.defaultdict(list)
         self.t_open: float | None = None
 
@@ -206,6 +207,7 @@ class LiveSession:
         status: Callable[[LiveSession], None] | None = None,
         status_period: float = 1.0,
         on_open: Callable[[Source], None] | None = None,
+        until: Callable[[], bool] | None = None,
     ) -> dict[str, Any]:
         """Open the source and run until stopped.
 
@@ -218,6 +220,7 @@ class LiveSession:
             status: Called about every ``status_period`` seconds (the status line).
             status_period: Seconds between two ``status`` calls.
             on_open: Called once the source is open (a UDP source then knows its port).
+            until: Stop when it returns true (after taking the datagrams already received).
 
         Returns:
             :meth:`report`.
@@ -237,6 +240,10 @@ class LiveSession:
                 if src.exhausted and not self._buffer:
                     break
                 if idle_exit is not None and self.started and now - last_frame_time > idle_exit:
+                    break
+                if until is not None and until():
+                    self.feed(src.poll(0.0))
+                    self.advance(self.clock())
                     break
                 timeout = 0.05
                 due = self.next_deadline()
@@ -429,6 +436,7 @@ class LiveSession:
             self.counts["deadline_misses"] += 1
         if kind == "live" or kind == "resume":
             self._latency.append(latency)
+        self._step_time.append(getattr(cmd.result, "step_time", math.nan))
         if self.record:
             r = self._rec
             res = cmd.result
@@ -445,12 +453,17 @@ class LiveSession:
 
     # ------------------------------------------------------------------------------ output
     def report(self) -> dict[str, Any]:
-        """Counters, latency figures (:func:`latency_stats`), rates and the source's counts."""
+        """Counters, latency figures (:func:`latency_stats`), rates and the source's counts.
+
+        ``controller_step`` has the same figures for the controller's own time per tick
+        (``StepResult.step_time``), the part of the latency the QP tick takes.
+        """
         wall = (self.clock() - self.t_open) if self.t_open is not None else 0.0
         return {
             "counts": dict(self.counts),
             "source": dict(self.source.counts),
             "latency": latency_stats(self._latency),
+            "controller_step": latency_stats(self._step_time),
             "budget_ms": 1e3 * self.budget,
             "capture_rate": self.rate,
             "control_rate": 1.0 / self.control_dt,
