@@ -18,8 +18,9 @@ Over the frames simulated (the unassisted replay stops at the first fallen frame
   weight ``m g``; ``contact_match`` the fraction of (frame, foot) where the simulated foot carries
   more than :data:`FOOT_LOADED_BW` of the weight exactly when the run says it supports;
 * **assist**: in the assisted replay, the norm of the virtual root force as % of body weight
-  (p95 and max) and of the root torque [N m], also as the lever ``|n| / (m g)`` [mm] — how far the
-  centre of pressure would have to move outside what the feet gave.
+  (mean, p95, max; also its horizontal part) and of the root torque [N m], also as the lever
+  ``|n| / (m g)`` [mm] — how far the centre of pressure would have to move outside what the feet
+  gave.
 
 Verdict: ``falls`` (survived < 1), else ``saturates`` (more than :data:`SATURATION_FRAMES_MAX` of
 the frames saturated), else ``ok``.
@@ -145,6 +146,7 @@ def _replay_block(s: Any) -> dict[str, Any]:
         n = s.assist_torque[sim]
         block["assist"] = {
             "force_bw_pct": _stats(f),
+            "horizontal_force_bw_pct": _stats(s.assist_horizontal[sim] / s.weight * 100.0),
             "torque_Nm": _stats(n),
             "torque_lever_mm": _stats(n / s.weight, 1e3),
         }
@@ -222,7 +224,8 @@ def dumps(metrics: dict[str, Any]) -> str:
 #: Columns of the batch summary (``physics/<column>``) and where each comes from.
 SUMMARY_COLUMNS = (
     "verdict", "survived", "saturated_frames", "root_pos_p95_mm", "joint_rms_deg",
-    "feet_share", "assist_force_p95_bw_pct", "assist_torque_p95_Nm", "real_time_factor",
+    "feet_share", "assist_force_p95_bw_pct", "assist_horizontal_p95_bw_pct", "assist_torque_p95_Nm",
+    "real_time_factor",
 )  # fmt: skip
 
 
@@ -243,6 +246,7 @@ def summary_row(metrics: dict[str, Any]) -> dict[str, Any]:
         "joint_rms_deg": num(u["joint_tracking_rms_deg"]["overall"]),
         "feet_share": num(u["feet"]["weight_share_mean"]),
         "assist_force_p95_bw_pct": num(assist.get("force_bw_pct", {}).get("p95")),
+        "assist_horizontal_p95_bw_pct": num(assist.get("horizontal_force_bw_pct", {}).get("p95")),
         "assist_torque_p95_Nm": num(assist.get("torque_Nm", {}).get("p95")),
         "real_time_factor": num(u["real_time_factor"]),
     }

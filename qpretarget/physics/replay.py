@@ -62,7 +62,7 @@ class ReplaySeries:
         foot_force: (T, F) mean normal floor force on each foot over the frame [N].
         other_force: (T,) mean normal floor force on the rest of the body [N].
         assist_force, assist_torque: (T,) mean norm of the assisting weld's force [N] and
-            torque [N m].
+            torque [N m]; assist_horizontal: of its horizontal force [N].
         ref_contacts: (T, F) the run's supporting feet.
         floor_height: floor placement [m] (lowest collision point in the first frame).
         wall_time_s: time the replay took; sim_time_s: simulated time.
@@ -83,6 +83,7 @@ class ReplaySeries:
     other_force: np.ndarray
     assist_force: np.ndarray
     assist_torque: np.ndarray
+    assist_horizontal: np.ndarray
     ref_contacts: np.ndarray
     joint_names: list[str]
     foot_names: list[str]
@@ -269,7 +270,7 @@ def replay_run(
     saturated = np.zeros((T, n), bool)
     foot_force = np.full((T, F), np.nan)
     other_force = nan.copy()
-    assist_f, assist_n = nan.copy(), nan.copy()
+    assist_f, assist_n, assist_h = nan.copy(), nan.copy(), nan.copy()
     pelvis_h[0], tilt[0], pos_err[0], ori_err[0] = d.qpos[2], 0.0, 0.0, 0.0
     joint_err[0] = d.qpos[pm.qpos_adr] - qj_ref[0]
     foot_force[0], other_force[0] = np.nan, np.nan
@@ -296,7 +297,7 @@ def replay_run(
         sat = np.zeros(n, bool)
         ff = np.zeros(F)
         fo = 0.0
-        af = an = 0.0
+        af = ah = an = 0.0
         for j in range(n_sub):
             a = j / n_sub
             qr = q0 + a * (q1 - q0)
@@ -311,8 +312,9 @@ def replay_run(
             if assisted:  # the weld's constraint force: 3 force rows, 3 torque rows
                 rows = (d.efc_type == eq_type) & (d.efc_id == pm.assist_eq)
                 w = d.efc_force[rows]
-                if len(w) == 6:
+                if len(w) == 6:  # rows in world axes: x y z force, then torque
                     af += float(np.linalg.norm(w[:3]))
+                    ah += float(np.linalg.norm(w[:2]))
                     an += float(np.linalg.norm(w[3:]))
             for c in range(d.ncon):
                 con = d.contact[c]
@@ -336,6 +338,7 @@ def replay_run(
         other_force[k] = fo / n_sub
         if assisted:
             assist_f[k], assist_n[k] = af / n_sub, an / n_sub
+            assist_h[k] = ah / n_sub
         qb = d.qpos[3:7]
         pelvis_h[k] = d.qpos[2]
         pos_err[k] = float(np.linalg.norm(d.qpos[0:3] - p1))
@@ -371,6 +374,7 @@ def replay_run(
         other_force=other_force,
         assist_force=assist_f,
         assist_torque=assist_n,
+        assist_horizontal=assist_h,
         ref_contacts=ref_contacts,
         joint_names=list(pm.joint_names),
         foot_names=list(pm.foot_names),
