@@ -227,71 +227,133 @@ def e_step(
     A = Afull[idx_act]
     log_in = math.log1p(-mu) - math.log(M) + lognorm
     log_out = math.log(mu / N) if mu > 0 else -np.inf
+    if mode == "dense":
+        sums = _dense_sums(S, Sn, B, A, idx_act, Mtot, sigma2, (log_in, log_out), use_n, chunk)
+        sums.pairs = pairs  # passed through unchanged
+    elif mode == "kdtree":
+        sums = _kdtree_sums(
+            S, Sn, B, A, Afull, idx_act, Mtot, sigma2, (log_in, log_out), use_n, neighbors, pairs
+        )
+    else:
+        raise ConfigError(f"estep must be 'kdtree' or 'dense', got {mode!r}.", path="em.estep")
+    return EStep(
+        sums.nll, sums.P1, sums.Px, sums.Pn, sums.wS2, sums.wN2, sums.Np, dim,
+        normal_weight if use_n else 0.0, normal_scale, sums.pairs,
+    )  # fmt: skip
+
+
+@dataclass
+class _Sums:
+    """Posterior sums of an E-step (the fields of :class:`EStep` it computes)."""
+
+    nll: float
+    P1: np.ndarray
+    Px: np.ndarray
+    Pn: np.ndarray | None
+    wS2: float
+    wN2: float
+    Np: float
+    pairs: np.ndarray | None = None
+
+
+def _log_posteriors(a: np.ndarray, log_in: float, log_out: float) -> tuple[np.ndarray, np.ndarray]:
+    r"""Per cloud point :math:`\log p(s_n)` (n,) and posteriors (n, k).
+
+    From the exponents :math:`a_{nk} = -d_{nk}^2 / 2\sigma^2`, by log-sum-exp (no underflow).
+    """
+    amax = a.max(axis=1)
+    lse = amax + np.log(np.exp(a - amax[:, None]).sum(axis=1))
+    logp = np.logaddexp(log_in + lse, log_out)
+    post = np.exp(log_in + a - logp[:, None])
+    return logp, post
+
+
+def _dense_sums(
+    S: np.ndarray,
+    Sn: np.ndarray,
+    B: np.ndarray,
+    A: np.ndarray,
+    idx_act: np.ndarray,
+    Mtot: int,
+    sigma2: float,
+    log_in_out: tuple[float, float],
+    use_n: bool,
+    chunk: int,
+) -> _Sums:
+    """E-step over all (cloud point, active template point) pairs, ``chunk`` cloud points a time."""
+    N, M = len(B), len(A)
     P1: np.ndarray = np.zeros(Mtot)
     Px: np.ndarray = np.zeros((Mtot, 3))
-    Pn: np.ndarray | None = np.zeros((Mtot, 3)) if use_n else None
+    Pn: np.ndarray = np.zeros((Mtot, 3))
     nll = 0.0
     wS2 = wN2 = Np = 0.0
     s2 = np.einsum("na,na->n", S, S)
     n2 = np.einsum("na,na->n", Sn, Sn)
-    if mode == "dense":
-        for lo in range(0, N, chunk):
-            Bc = B[lo : lo + chunk]
-            # Squared distances coordinate by coordinate (no BLAS product, exact, >= 0).
-            D = np.zeros((len(Bc), M))
-            for c in range(A.shape[1]):
-                diff = Bc[:, c, None] - A[None, :, c]
-                D += diff * diff
-            a = D * (-0.5 / sigma2)
-            amax = a.max(axis=1)
-            lse = amax + np.log(np.exp(a - amax[:, None]).sum(axis=1))
-            logp = np.logaddexp(log_in + lse, log_out)
-            nll -= float(logp.sum())
-            post = np.exp(log_in + a - logp[:, None])
-            w = post.sum(axis=1)
-            P1[idx_act] += post.sum(axis=0)
-            Px[idx_act] += np.einsum("nm,na->ma", post, S[lo : lo + chunk])
-            wS2 += float(w @ s2[lo : lo + chunk])
-            if use_n:
-                Pn[idx_act] += np.einsum("nm,na->ma", post, Sn[lo : lo + chunk])  # type: ignore[index]
-                wN2 += float(w @ n2[lo : lo + chunk])
-            Np += float(w.sum())
-    elif mode == "kdtree":
-        from scipy.spatial import cKDTree
-
-        if pairs is None:
-            k = int(min(neighbors, M))
-            dist, nb = cKDTree(A).query(B, k=k)
-            if k == 1:
-                dist, nb = dist[:, None], nb[:, None]
-            pairs = idx_act[nb]
-            d2 = dist * dist
-        else:
-            k = pairs.shape[1]
-            diff = B[:, None, :] - Afull[pairs]
-            d2 = np.einsum("nka,nka->nk", diff, diff)
-        a = d2 * (-0.5 / sigma2)
-        amax = a.max(axis=1)
-        lse = amax + np.log(np.exp(a - amax[:, None]).sum(axis=1))
-        logp = np.logaddexp(log_in + lse, log_out)
-        nll = -float(logp.sum())
-        post = np.exp(log_in + a - logp[:, None])
+    for lo in range(0, N, chunk):
+        Bc = B[lo : lo + chunk]
+        # Squared distances coordinate by coordinate (no BLAS product, exact, >= 0).
+        D = np.zeros((len(Bc), M))
+        for c in range(A.shape[1]):
+            diff = Bc[:, c, None] - A[None, :, c]
+            D += diff * diff
+        logp, post = _log_posteriors(D * (-0.5 / sigma2), *log_in_out)
+        nll -= float(logp.sum())
         w = post.sum(axis=1)
-        m = pairs.reshape(-1)
-        pf = post.reshape(-1)
-        P1 = np.bincount(m, pf, Mtot)
-        rep = np.repeat(np.arange(N), k)
-        Px = np.stack([np.bincount(m, pf * S[rep, c], Mtot) for c in range(3)], axis=1)
-        wS2 = float(w @ s2)
+        P1[idx_act] += post.sum(axis=0)
+        Px[idx_act] += np.einsum("nm,na->ma", post, S[lo : lo + chunk])
+        wS2 += float(w @ s2[lo : lo + chunk])
         if use_n:
-            Pn = np.stack([np.bincount(m, pf * Sn[rep, c], Mtot) for c in range(3)], axis=1)
-            wN2 = float(w @ n2)
-        Np = float(w.sum())
+            Pn[idx_act] += np.einsum("nm,na->ma", post, Sn[lo : lo + chunk])
+            wN2 += float(w @ n2[lo : lo + chunk])
+        Np += float(w.sum())
+    return _Sums(nll, P1, Px, Pn if use_n else None, wS2, wN2, Np)
+
+
+def _kdtree_sums(
+    S: np.ndarray,
+    Sn: np.ndarray,
+    B: np.ndarray,
+    A: np.ndarray,
+    Afull: np.ndarray,
+    idx_act: np.ndarray,
+    Mtot: int,
+    sigma2: float,
+    log_in_out: tuple[float, float],
+    use_n: bool,
+    neighbors: int,
+    pairs: np.ndarray | None,
+) -> _Sums:
+    """E-step over each cloud point's ``neighbors`` nearest active template points or ``pairs``."""
+    from scipy.spatial import cKDTree
+
+    N = len(B)
+    if pairs is None:
+        k = int(min(neighbors, len(A)))
+        dist, nb = cKDTree(A).query(B, k=k)
+        if k == 1:
+            dist, nb = dist[:, None], nb[:, None]
+        pairs = idx_act[nb]
+        d2 = dist * dist
     else:
-        raise ConfigError(f"estep must be 'kdtree' or 'dense', got {mode!r}.", path="em.estep")
-    return EStep(
-        nll, P1, Px, Pn, wS2, wN2, Np, dim, normal_weight if use_n else 0.0, normal_scale, pairs
-    )
+        k = pairs.shape[1]
+        diff = B[:, None, :] - Afull[pairs]
+        d2 = np.einsum("nka,nka->nk", diff, diff)
+    logp, post = _log_posteriors(d2 * (-0.5 / sigma2), *log_in_out)
+    nll = -float(logp.sum())
+    w = post.sum(axis=1)
+    m = pairs.reshape(-1)
+    pf = post.reshape(-1)
+    P1 = np.bincount(m, pf, Mtot)
+    rep = np.repeat(np.arange(N), k)
+    Px = np.stack([np.bincount(m, pf * S[rep, c], Mtot) for c in range(3)], axis=1)
+    Pn = None
+    wN2 = 0.0
+    if use_n:
+        n2 = np.einsum("na,na->n", Sn, Sn)
+        Pn = np.stack([np.bincount(m, pf * Sn[rep, c], Mtot) for c in range(3)], axis=1)
+        wN2 = float(w @ n2)
+    s2 = np.einsum("na,na->n", S, S)
+    return _Sums(nll, P1, Px, Pn, float(w @ s2), wN2, float(w.sum()), pairs)
 
 
 def visible_from(
@@ -320,6 +382,42 @@ def visible_from(
 
 
 # ------------------------------------------------------------------------------ results
+@dataclass
+class _Trial:
+    """Outcome of an M-step's line search: accepted or not, step length, the point tried."""
+
+    accepted: bool
+    alpha: float
+    halvings: int
+    increase: bool  # the full step increased the objective
+    q: np.ndarray
+    posed: PosedTemplate
+
+
+class _Neighbours:
+    """The E-steps of one EM loop, reusing the kd-tree pairs until they are stale.
+
+    Pairs are searched again once a template point has moved more than ``em.neighbor_refresh``
+    sigma from where they were searched (:meth:`CloudRetargeter._kept_pairs`).
+    """
+
+    def __init__(self, fit: CloudRetargeter) -> None:
+        self.fit = fit
+        self.pairs: np.ndarray | None = None
+        self.ref: np.ndarray | None = None  # active template points at the last search
+
+    def e_step(
+        self, S: np.ndarray, posed: PosedTemplate, active: np.ndarray, sigma2: float, **extra: Any
+    ) -> EStep:
+        """:meth:`CloudRetargeter._e_step` with the kept pairs."""
+        pairs = self.fit._kept_pairs(self.pairs, self.ref, posed, active, sigma2)
+        est = self.fit._e_step(S, posed, active, sigma2, pairs=pairs, **extra)
+        if pairs is None:
+            self.ref = posed.points[active]
+        self.pairs = est.pairs
+        return est
+
+
 @dataclass
 class IterationLog:
     """One EM iteration: NLL before it, the step length accepted, halvings, sigma^2 after."""
@@ -751,12 +849,11 @@ class CloudRetargeter:
         ell = em.normal_scale
         use_rows = self.stability_mode == "qp"
         nll = np.nan
-        pairs, ref = None, None
+        neighbours = _Neighbours(self)
         eta = 1.0
         for _ in range(iterations):
             posed = T.pose(q)
-            pairs = self._kept_pairs(pairs, ref, posed, active, sigma2)
-            est = self._e_step(
+            est = neighbours.e_step(
                 S,
                 posed,
                 active,
@@ -765,11 +862,7 @@ class CloudRetargeter:
                 Vn=posed.normals if lam > 0 else None,
                 normal_weight=lam,
                 normal_scale=ell,
-                pairs=pairs,
             )
-            if pairs is None:
-                ref = posed.points[active]
-            pairs = est.pairs
             nll = est.nll
             J6 = T.joint_jacobians()
             E = est.Px - est.P1[:, None] * posed.points
@@ -783,45 +876,70 @@ class CloudRetargeter:
             if step is None:
                 log.append(IterationLog(stage, nll, nll + prior0, 0.0, 0, sigma2, 0.0))
                 break
-            accepted, halvings, increase = False, 0, False
-            # Over-relaxation first (alpha = eta > 1, kept only if Q still decreases), then the
-            # plain step, then halvings.
-            alphas = ([eta] if eta > 1.0 and em.max_backtracks > 0 else []) + [1.0]
-            alpha = alphas[0]
-            while True:
-                q_try = self._clip(pin.integrate(self.model, q, alpha * step))
-                posed_try = T.pose(q_try, jacobians=False)
-                obj = est.q_value(posed_try, sigma2) + self._prior(q_try, q_prev)
-                ok = obj <= obj0
-                if alpha == 1.0 and halvings == 0 and not ok:
-                    increase = True
-                if (ok and self._stable(q_try)) or em.max_backtracks == 0:
-                    accepted = True
-                    break
-                if alpha > 1.0:
-                    alpha = 1.0
-                    continue
-                if halvings >= em.max_backtracks:
-                    break
-                alpha *= 0.5
-                halvings += 1
-            if not accepted:
+            trial = self._line_search(est, q, step, q_prev, sigma2, obj0, eta)
+            if not trial.accepted:
                 log.append(
-                    IterationLog(stage, nll, nll + prior0, 0.0, halvings, sigma2, 0.0, increase)
+                    IterationLog(
+                        stage, nll, nll + prior0, 0.0, trial.halvings, sigma2, 0.0, trial.increase
+                    )
                 )
                 break
+            alpha, q_try = trial.alpha, trial.q
             eta = min(eta * 1.25, em.overrelaxation) if alpha >= max(eta, 1.0) else 1.0
-            applied = self.model_difference(q, q_try)
+            move, base = self._moves(q, q_try)
             q = q_try
-            sigma2 = max(est.sigma2_update(posed_try), em.sigma2_min)
-            move = float(np.max(np.abs(applied[self._vi]), initial=0.0))
-            base = float(np.max(np.abs(applied[: self.robot.root_nv]), initial=0.0))
+            sigma2 = max(est.sigma2_update(trial.posed), em.sigma2_min)
             log.append(
-                IterationLog(stage, nll, nll + prior0, alpha, halvings, sigma2, move, increase)
+                IterationLog(
+                    stage, nll, nll + prior0, alpha, trial.halvings, sigma2, move, trial.increase
+                )
             )
             if max(move, base) < em.tolerance:
                 break
         return q, sigma2, nll
+
+    def _line_search(
+        self,
+        est: EStep,
+        q: np.ndarray,
+        step: np.ndarray,
+        q_prev: np.ndarray | None,
+        sigma2: float,
+        obj0: float,
+        eta: float,
+    ) -> _Trial:
+        """Step length of an M-step (module docstring, *Monotonicity*).
+
+        Over-relaxation first (alpha = ``eta`` > 1, kept only if Q still decreases), then the
+        plain step, then ``em.max_backtracks`` halvings; a step must also keep the robot stable.
+        """
+        em = self.config.em
+        halvings, increase = 0, False
+        alphas = ([eta] if eta > 1.0 and em.max_backtracks > 0 else []) + [1.0]
+        alpha = alphas[0]
+        while True:
+            q_try = self._clip(pin.integrate(self.model, q, alpha * step))
+            posed_try = self.template.pose(q_try, jacobians=False)
+            obj = est.q_value(posed_try, sigma2) + self._prior(q_try, q_prev)
+            ok = obj <= obj0
+            if alpha == 1.0 and halvings == 0 and not ok:
+                increase = True
+            if (ok and self._stable(q_try)) or em.max_backtracks == 0:
+                return _Trial(True, alpha, halvings, increase, q_try, posed_try)
+            if alpha > 1.0:
+                alpha = 1.0
+                continue
+            if halvings >= em.max_backtracks:
+                return _Trial(False, alpha, halvings, increase, q_try, posed_try)
+            alpha *= 0.5
+            halvings += 1
+
+    def _moves(self, q: np.ndarray, q_new: np.ndarray) -> tuple[float, float]:
+        """Largest joint move [rad] and largest base move from ``q`` to ``q_new`` (V.C)."""
+        applied = self.model_difference(q, q_new)
+        move = float(np.max(np.abs(applied[self._vi]), initial=0.0))
+        base = float(np.max(np.abs(applied[: self.robot.root_nv]), initial=0.0))
+        return move, base
 
     def _centre_stage(
         self,
@@ -850,104 +968,149 @@ class CloudRetargeter:
         """
         cal, em = self.config.calibration, self.config.em
         T = self.template
-        U = self._centre_basis  # (3A, k): offsets e = U x
-        nv, ne = self.robot.nv, U.shape[1]
-        n = nv + ne
-        if self._qp_centres is None or self._qp_centres.n != n:
-            self._qp_centres = QPProblem(n, self._n_rows)
+        nv, ne = self.robot.nv, self._centre_basis.shape[1]
+        if self._qp_centres is None or self._qp_centres.n != nv + ne:
+            self._qp_centres = QPProblem(nv + ne, self._n_rows)
             self._solver_centres = make_solver(self.config.solver, path="solver")
         qp = self._qp_centres
-        e_hat, Lam = self._centre_mean, self._centre_info
-        e = e_hat.copy() if self._centre_x is None else self._centre_x.copy()
-        use_rows = self.stability_mode == "qp"
-        bound = cal.centre_bound
-
-        def apply(ev: np.ndarray) -> None:
-            T.set_centres((U @ ev).reshape(-1, 3))
-
-        def prior_e(ev: np.ndarray) -> float:
-            d = ev - e_hat
-            return 0.5 * float(d @ Lam @ d)
-
-        Hqq = Hqe = Hee = None
-        pairs, ref = None, None
+        e = self._centre_mean.copy() if self._centre_x is None else self._centre_x.copy()
+        blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        neighbours = _Neighbours(self)
         for _ in range(cal.centre_iterations):
             posed = T.pose(q)
-            pairs = self._kept_pairs(pairs, ref, posed, active, sigma2)
-            est = self._e_step(S, posed, active, sigma2, pairs=pairs)
-            if pairs is None:
-                ref = posed.points[active]
-            pairs = est.pairs
-            J6 = T.joint_jacobians()
-            E = est.Px - est.P1[:, None] * posed.points
-            Hqq, bq = T.normal_equations(posed, J6, est.P1, E)
-            Hqe, Hee, be = T.centre_normal_equations(posed, J6, est.P1, E)
-            Hqe, Hee, be = Hqe @ U, U.T @ Hee @ U, U.T @ be
-            qp.H[:nv, :nv] = Hqq
-            qp.H[:nv, nv:] = Hqe
-            qp.H[nv:, :nv] = Hqe.T
-            qp.H[nv:, nv:] = Hee + sigma2 * Lam
-            qp.g[:nv] = -bq
-            qp.g[nv:] = -be + sigma2 * (Lam @ (e - e_hat))
-            self._add_priors(qp.H, qp.g, q, q_prev, sigma2)
-            qp.H[np.diag_indices(nv)] += self._damping(Hqq)
-            self._joint_step_bounds(qp, q)
-            qp.lb[nv:] = np.minimum(-bound - e, 0.0)
-            qp.ub[nv:] = np.maximum(bound - e, 0.0)
-            self._set_rows(qp, q, use_rows)
+            est = neighbours.e_step(S, posed, active, sigma2)
+            blocks = self._centre_qp(qp, est, posed, q, q_prev, e, sigma2)
             sol = self._solver_centres.solve(qp)
-            prior0 = self._prior(q, q_prev) + prior_e(e)
+            prior0 = self._prior(q, q_prev) + self._centre_prior(e)
             obj0 = est.q_value(posed, sigma2) + prior0
             if sol.x is None or not np.all(np.isfinite(sol.x)):
                 log.append(IterationLog("centres", est.nll, est.nll + prior0, 0.0, 0, sigma2, 0.0))
                 break
             x = np.clip(sol.x, qp.lb, qp.ub)
-            alpha, halvings, accepted = 1.0, 0, False
-            while True:
-                q_try = self._clip(pin.integrate(self.model, q, alpha * x[:nv]))
-                e_try = np.clip(e + alpha * x[nv:], -bound, bound)
-                apply(e_try)
-                posed_try = T.pose(q_try, jacobians=False)
-                obj = est.q_value(posed_try, sigma2) + self._prior(q_try, q_prev) + prior_e(e_try)
-                if obj <= obj0 and self._stable(q_try):
-                    accepted = True
-                    break
-                if halvings >= max(em.max_backtracks, 1):
-                    break
-                alpha *= 0.5
-                halvings += 1
-            if not accepted:
-                apply(e)
+            trial, e_try = self._centre_line_search(est, q, e, x, q_prev, sigma2, obj0)
+            if not trial.accepted:
+                self._apply_centres(e)
                 log.append(
-                    IterationLog("centres", est.nll, est.nll + prior0, 0.0, halvings, sigma2, 0.0)
+                    IterationLog(
+                        "centres", est.nll, est.nll + prior0, 0.0, trial.halvings, sigma2, 0.0
+                    )
                 )
                 break
-            applied = self.model_difference(q, q_try)
-            move = float(np.max(np.abs(applied[self._vi]), initial=0.0))
-            base = float(np.max(np.abs(applied[: self.robot.root_nv]), initial=0.0))
+            move, base = self._moves(q, trial.q)
             shift = float(np.max(np.abs(e_try - e), initial=0.0))
-            q, e = q_try, e_try
-            sigma2 = max(est.sigma2_update(posed_try), em.sigma2_min)
+            q, e = trial.q, e_try
+            sigma2 = max(est.sigma2_update(trial.posed), em.sigma2_min)
             log.append(
-                IterationLog("centres", est.nll, est.nll + prior0, alpha, halvings, sigma2, move)
+                IterationLog(
+                    "centres", est.nll, est.nll + prior0, trial.alpha, trial.halvings, sigma2, move
+                )
             )
             # Converged: the paper's joint criterion (V.C) and the centres moving less than
             # CENTRE_TOLERANCE.
             if max(move, base) < em.tolerance and shift < CENTRE_TOLERANCE:
                 break
-        if Hqq is not None and Hqe is not None and Hee is not None:
-            # This frame's information on the centres, the pose marginalized (at the last
-            # linearization; the temporal term counts as the pose's prior).
-            A = Hqq.copy()
-            if q_prev is not None and em.temporal_weight > 0:
-                A[self._vi, self._vi] += 2.0 * sigma2 * em.temporal_weight
-            A[np.diag_indices(nv)] += self._damping(Hqq) + 1e-12
-            info = (Hee - Hqe.T @ np.linalg.solve(A, Hqe)) / sigma2
-            info = 0.5 * (info + info.T)
-            self._centre_info = Lam + cal.centre_information * info
-            self._centre_mean = e.copy()
+        if blocks is not None:
+            self._learn_centres(*blocks, q_prev, sigma2, e)
         self._centre_x = e.copy()
         return q, sigma2
+
+    def _apply_centres(self, e: np.ndarray) -> None:
+        """Set the template's joint-centre offsets to ``U e``."""
+        self.template.set_centres((self._centre_basis @ e).reshape(-1, 3))
+
+    def _centre_prior(self, e: np.ndarray) -> float:
+        r""":math:`\tfrac12 (e - \hat e)^\top \Lambda (e - \hat e)`."""
+        d = e - self._centre_mean
+        return 0.5 * float(d @ self._centre_info @ d)
+
+    def _centre_qp(
+        self,
+        qp: QPProblem,
+        est: EStep,
+        posed: PosedTemplate,
+        q: np.ndarray,
+        q_prev: np.ndarray | None,
+        e: np.ndarray,
+        sigma2: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Fill the pose + centre-offset QP of one M-step; return its blocks (Hqq, Hqe, Hee)."""
+        T, U = self.template, self._centre_basis
+        nv = self.robot.nv
+        e_hat, Lam = self._centre_mean, self._centre_info
+        bound = self.config.calibration.centre_bound
+        J6 = T.joint_jacobians()
+        E = est.Px - est.P1[:, None] * posed.points
+        Hqq, bq = T.normal_equations(posed, J6, est.P1, E)
+        Hqe, Hee, be = T.centre_normal_equations(posed, J6, est.P1, E)
+        Hqe, Hee, be = Hqe @ U, U.T @ Hee @ U, U.T @ be
+        qp.H[:nv, :nv] = Hqq
+        qp.H[:nv, nv:] = Hqe
+        qp.H[nv:, :nv] = Hqe.T
+        qp.H[nv:, nv:] = Hee + sigma2 * Lam
+        qp.g[:nv] = -bq
+        qp.g[nv:] = -be + sigma2 * (Lam @ (e - e_hat))
+        self._add_priors(qp.H, qp.g, q, q_prev, sigma2)
+        qp.H[np.diag_indices(nv)] += self._damping(Hqq)
+        self._joint_step_bounds(qp, q)
+        qp.lb[nv:] = np.minimum(-bound - e, 0.0)
+        qp.ub[nv:] = np.maximum(bound - e, 0.0)
+        self._set_rows(qp, q, self.stability_mode == "qp")
+        return Hqq, Hqe, Hee
+
+    def _centre_line_search(
+        self,
+        est: EStep,
+        q: np.ndarray,
+        e: np.ndarray,
+        x: np.ndarray,
+        q_prev: np.ndarray | None,
+        sigma2: float,
+        obj0: float,
+    ) -> tuple[_Trial, np.ndarray]:
+        """Halve the pose + centre step ``x`` until the objective does not increase (stable)."""
+        nv = self.robot.nv
+        bound = self.config.calibration.centre_bound
+        max_halvings = max(self.config.em.max_backtracks, 1)
+        alpha, halvings = 1.0, 0
+        while True:
+            q_try = self._clip(pin.integrate(self.model, q, alpha * x[:nv]))
+            e_try = np.clip(e + alpha * x[nv:], -bound, bound)
+            self._apply_centres(e_try)
+            posed_try = self.template.pose(q_try, jacobians=False)
+            obj = (
+                est.q_value(posed_try, sigma2)
+                + self._prior(q_try, q_prev)
+                + self._centre_prior(e_try)
+            )
+            if obj <= obj0 and self._stable(q_try):
+                return _Trial(True, alpha, halvings, False, q_try, posed_try), e_try
+            if halvings >= max_halvings:
+                return _Trial(False, alpha, halvings, False, q_try, posed_try), e_try
+            alpha *= 0.5
+            halvings += 1
+
+    def _learn_centres(
+        self,
+        Hqq: np.ndarray,
+        Hqe: np.ndarray,
+        Hee: np.ndarray,
+        q_prev: np.ndarray | None,
+        sigma2: float,
+        e: np.ndarray,
+    ) -> None:
+        """Add this frame's information on the centres, the pose marginalized (Schur complement).
+
+        At the last linearization; the temporal term counts as the pose's prior.
+        """
+        em, nv = self.config.em, self.robot.nv
+        A = Hqq.copy()
+        if q_prev is not None and em.temporal_weight > 0:
+            A[self._vi, self._vi] += 2.0 * sigma2 * em.temporal_weight
+        A[np.diag_indices(nv)] += self._damping(Hqq) + 1e-12
+        info = (Hee - Hqe.T @ np.linalg.solve(A, Hqe)) / sigma2
+        info = 0.5 * (info + info.T)
+        self._centre_info = self._centre_info + self.config.calibration.centre_information * info
+        self._centre_mean = e.copy()
 
     def final_nll(self, S: np.ndarray, q: np.ndarray, sigma2: float, active: np.ndarray) -> float:
         """Eq. 3 at ``q`` (same E-step mode as the fit)."""
@@ -1079,31 +1242,7 @@ class CloudRetargeter:
                 mode="dense" if dense else "kdtree",
                 neighbors=max(em.neighbors, 16),
             )
-            J6 = T.joint_jacobians()
-            Js = T.scale_jacobian(posed)
-            if common:
-                Js = Js.sum(axis=2, keepdims=True)
-            E = est.Px - est.P1[:, None] * posed.points
-            # Pose block by the template's moments; the scale blocks by plain sums (no large
-            # BLAS product: multi-threaded BLAS is slow on a loaded machine).
-            H = np.empty((nv + ns, nv + ns))
-            b = np.empty(nv + ns)
-            H[:nv, :nv], b[:nv] = T.normal_equations(posed, J6, est.P1, E)
-            Jq = T.point_jacobians(posed, J6)
-            PJs = Js * est.P1[:, None, None]
-            H[:nv, nv:] = np.einsum("man,mak->nk", Jq, PJs)
-            H[nv:, :nv] = H[:nv, nv:].T
-            H[nv:, nv:] = np.einsum("man,mak->nk", Js, PJs)
-            b[nv:] = np.einsum("mak,ma->k", Js, E)
-            if not common and cal.scale_prior > 0:
-                Pm = np.eye(K) - 1.0 / K
-                H[nv:, nv:] += 2 * sigma2 * cal.scale_prior * Pm
-                b[nv:] -= 2 * sigma2 * cal.scale_prior * Pm @ s
-            if cal.posture_weight > 0:
-                w = 2.0 * sigma2 * cal.posture_weight
-                H[self._vi, self._vi] += w
-                b[self._vi] -= w * (q[self._qi] - self._calibration_posture)
-            H[np.diag_indices(nv + ns)] += em.damping * max(np.trace(H) / (nv + ns), 1e-12) + 1e-12
+            H, b = self._calibration_equations(posed, est, q, s, sigma2, common)
             qp.H[...], qp.g[...] = H, -b
             vi = self._joint_step_bounds(qp, q)
             qp.lb[nv:] = lo_s - (s.min() if common else s)
@@ -1114,20 +1253,11 @@ class CloudRetargeter:
             x = sol.x
             ds = np.full(K, x[nv]) if common else x[nv:]
             obj0 = est.q_value(posed, sigma2) + self._scale_prior(s) + self._posture_prior(q)
-            alpha = 1.0
-            for _ in range(max(em.max_backtracks, 1)):
-                s_try = np.clip(s + alpha * ds, lo_s, hi_s)
-                T.set_scales(s_try)
-                q_try = self._clip(pin.integrate(self.model, q, alpha * x[:nv]))
-                p_try = T.pose(q_try, jacobians=False)
-                obj = est.q_value(p_try, sigma2) + self._scale_prior(s_try)
-                if obj + self._posture_prior(q_try) <= obj0:
-                    break
-                alpha *= 0.5
-            else:
+            found = self._calibration_line_search(est, q, s, x[:nv], ds, sigma2, obj0)
+            if found is None:
                 T.set_scales(s)
                 break
-            q, s = q_try, s_try
+            alpha, q, s, p_try = found
             sigma2 = max(est.sigma2_update(p_try), em.sigma2_min)
             if (
                 np.max(np.abs(alpha * x[vi]), initial=0.0) < em.tolerance
@@ -1137,6 +1267,79 @@ class CloudRetargeter:
                 break
         T.set_scales(s)
         return q, s, sigma2
+
+    def _calibration_equations(
+        self,
+        posed: PosedTemplate,
+        est: EStep,
+        q: np.ndarray,
+        s: np.ndarray,
+        sigma2: float,
+        common: bool,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Gauss-Newton system ``(H, b)`` of a calibration M-step on pose and scales.
+
+        The pose block by the template's moments; the scale blocks by plain sums (no large BLAS
+        product: multi-threaded BLAS is slow on a loaded machine). Adds the scale prior (per
+        segment), the posture prior and Levenberg damping.
+        """
+        cal, em = self.config.calibration, self.config.em
+        T = self.template
+        nv, K = self.robot.nv, len(s)
+        ns = 1 if common else K
+        J6 = T.joint_jacobians()
+        Js = T.scale_jacobian(posed)
+        if common:
+            Js = Js.sum(axis=2, keepdims=True)
+        E = est.Px - est.P1[:, None] * posed.points
+        H = np.empty((nv + ns, nv + ns))
+        b = np.empty(nv + ns)
+        H[:nv, :nv], b[:nv] = T.normal_equations(posed, J6, est.P1, E)
+        Jq = T.point_jacobians(posed, J6)
+        PJs = Js * est.P1[:, None, None]
+        H[:nv, nv:] = np.einsum("man,mak->nk", Jq, PJs)
+        H[nv:, :nv] = H[:nv, nv:].T
+        H[nv:, nv:] = np.einsum("man,mak->nk", Js, PJs)
+        b[nv:] = np.einsum("mak,ma->k", Js, E)
+        if not common and cal.scale_prior > 0:
+            Pm = np.eye(K) - 1.0 / K
+            H[nv:, nv:] += 2 * sigma2 * cal.scale_prior * Pm
+            b[nv:] -= 2 * sigma2 * cal.scale_prior * Pm @ s
+        if cal.posture_weight > 0:
+            w = 2.0 * sigma2 * cal.posture_weight
+            H[self._vi, self._vi] += w
+            b[self._vi] -= w * (q[self._qi] - self._calibration_posture)
+        H[np.diag_indices(nv + ns)] += em.damping * max(np.trace(H) / (nv + ns), 1e-12) + 1e-12
+        return H, b
+
+    def _calibration_line_search(
+        self,
+        est: EStep,
+        q: np.ndarray,
+        s: np.ndarray,
+        dq: np.ndarray,
+        ds: np.ndarray,
+        sigma2: float,
+        obj0: float,
+    ) -> tuple[float, np.ndarray, np.ndarray, PosedTemplate] | None:
+        """``(alpha, q, s, posed)`` of the first halving that does not increase the objective.
+
+        ``None`` when ``em.max_backtracks`` halvings all increase it (the template keeps the
+        last scales tried; the caller restores its own).
+        """
+        lo_s, hi_s = (float(x) for x in self.config.calibration.scale_bounds)
+        T = self.template
+        alpha = 1.0
+        for _ in range(max(self.config.em.max_backtracks, 1)):
+            s_try = np.clip(s + alpha * ds, lo_s, hi_s)
+            T.set_scales(s_try)
+            q_try = self._clip(pin.integrate(self.model, q, alpha * dq))
+            p_try = T.pose(q_try, jacobians=False)
+            obj = est.q_value(p_try, sigma2) + self._scale_prior(s_try)
+            if obj + self._posture_prior(q_try) <= obj0:
+                return alpha, q_try, s_try, p_try
+            alpha *= 0.5
+        return None
 
     def _centre_selection(self, names: list[str]) -> np.ndarray:
         """(A,) mask of the articulations holding one of the joints ``names``."""
