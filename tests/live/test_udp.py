@@ -112,9 +112,11 @@ def test_faults_and_a_two_second_pause(tmp_path: Path, configs_dir: Path, mocap_
     assert c["held_frames"] + c["lost"] + c["extrapolated"] >= 240
     t = run["t"]
     np.testing.assert_allclose(np.diff(t), 0.01, atol=1e-9)  # every tick, through the pause
-    # Smooth hold and resume: no tick moves a joint more than the live motion's fastest tick.
-    dq = np.abs(np.diff(run["q"][:, 7:], axis=0)).max(axis=1)
-    kind = run["input"][1:]
-    live_max = dq[kind == "live"].max()
-    for k in ("extrapolated", "held", "resume"):
-        assert dq[kind == k].max() <= live_max, (k, dq[kind == k].max(), live_max)
+    # Smooth hold and resume: every tick within the joints' velocity limits and the config's
+    # acceleration limit (300 rad/s^2), through the hold and the resume (1e-9: round-off).
+    ctrl = Controller.from_yaml(config)
+    v_max = ctrl.robot.model.velocityLimit[6:]
+    v = run["v"][:, 6:]
+    assert np.all(np.abs(v) <= v_max * (1 + 1e-9))
+    dv = np.abs(np.diff(v, axis=0)).max(axis=1)
+    assert np.all(dv[run["status"][1:] == "ok"] <= 300.0 * 0.01 + 1e-9)
