@@ -124,7 +124,7 @@ def rasterize(
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     nx0 = np.einsum("ka,ka->k", n, tri[:, 0])
     size = np.maximum(c1 - c0, r1 - r0) + 1
-    pix_all, z_all, t_all = [], [], []
+    hits: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     bucket = 1
     while True:
         sel = np.flatnonzero(keep & (size <= bucket) & (size > bucket // 2))
@@ -137,43 +137,62 @@ def rasterize(
                 cols = c0[k, None] + ox[None, :]
                 rows = r0[k, None] + oy[None, :]
                 inb = (cols <= c1[k, None]) & (rows <= r1[k, None])
-                ku, kv = u[k], v[k]
-                # Edge functions of the projected triangle at the pixel centres.
-                e0 = (ku[:, 1, None] - ku[:, 0, None]) * (rows - kv[:, 0, None]) - (
-                    kv[:, 1, None] - kv[:, 0, None]
-                ) * (cols - ku[:, 0, None])
-                e1 = (ku[:, 2, None] - ku[:, 1, None]) * (rows - kv[:, 1, None]) - (
-                    kv[:, 2, None] - kv[:, 1, None]
-                ) * (cols - ku[:, 1, None])
-                e2 = (ku[:, 0, None] - ku[:, 2, None]) * (rows - kv[:, 2, None]) - (
-                    kv[:, 0, None] - kv[:, 2, None]
-                ) * (cols - ku[:, 2, None])
-                inside = inb & (
-                    ((e0 >= 0) & (e1 >= 0) & (e2 >= 0)) | ((e0 <= 0) & (e1 <= 0) & (e2 <= 0))
-                )
-                kk, jj = np.nonzero(inside)
-                if len(kk) == 0:
-                    continue
-                cc, rr = cols[kk, jj], rows[kk, jj]
-                tk = k[kk]
-                dx, dy = (cc - cx) / fx, (rr - cy) / fy
-                den = n[tk, 0] * dx + n[tk, 1] * dy + n[tk, 2]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    zz = nx0[tk] / den
-                ok = np.isfinite(zz) & (zz > NEAR)
-                pix_all.append(rr[ok] * W + cc[ok])
-                z_all.append(zz[ok])
-                t_all.append(tk[ok])
+                found = _pixel_hits(k, cols, rows, inb, u[k], v[k], n, nx0, intrinsics)
+                if found is not None:
+                    hits.append(found)
         if bucket >= max(W, H) or not np.any(keep & (size > bucket)):
             break
         bucket *= 2
-    if pix_all:
-        pix, zs, ts = np.concatenate(pix_all), np.concatenate(z_all), np.concatenate(t_all)
+    if hits:
+        pix, zs, ts = (np.concatenate(a) for a in zip(*hits, strict=True))
         order = np.argsort(zs, kind="stable")
         upix, first = np.unique(pix[order], return_index=True)
         depth[upix] = zs[order][first]
         index[upix] = ids[ts[order][first]]
     return depth.reshape(H, W), index.reshape(H, W)
+
+
+def _edge(
+    ku: np.ndarray, kv: np.ndarray, i: int, j: int, rows: np.ndarray, cols: np.ndarray
+) -> np.ndarray:
+    """Edge function of the projected edge ``i -> j`` at the pixel centres (sign: side)."""
+    return (ku[:, j, None] - ku[:, i, None]) * (rows - kv[:, i, None]) - (
+        kv[:, j, None] - kv[:, i, None]
+    ) * (cols - ku[:, i, None])
+
+
+def _pixel_hits(
+    k: np.ndarray,
+    cols: np.ndarray,
+    rows: np.ndarray,
+    inb: np.ndarray,
+    ku: np.ndarray,
+    kv: np.ndarray,
+    n: np.ndarray,
+    nx0: np.ndarray,
+    intrinsics: PinholeIntrinsics,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """``(pixel, depth, triangle)`` of the candidate pixels inside triangles ``k``.
+
+    A pixel is inside when its centre is on the same side of the three edges; its depth is the
+    pixel ray's intersection with the triangle's plane (module docstring). ``None``: no hit.
+    """
+    fx, fy, cx, cy = intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy
+    e0 = _edge(ku, kv, 0, 1, rows, cols)
+    e1 = _edge(ku, kv, 1, 2, rows, cols)
+    e2 = _edge(ku, kv, 2, 0, rows, cols)
+    inside = inb & (((e0 >= 0) & (e1 >= 0) & (e2 >= 0)) | ((e0 <= 0) & (e1 <= 0) & (e2 <= 0)))
+    kk, jj = np.nonzero(inside)
+    if len(kk) == 0:
+        return None
+    cc, rr = cols[kk, jj], rows[kk, jj]
+    tk = k[kk]
+    dx, dy = (cc - cx) / fx, (rr - cy) / fy
+    den = n[tk, 0] * dx + n[tk, 1] * dy + n[tk, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zz = nx0[tk] / den
+    ok = np.isfinite(zz) & (zz > NEAR)
+    return rr[ok] * intrinsics.width + cc[ok], zz[ok], tk[ok]
 
 
 def render_depth(
@@ -440,7 +459,8 @@ class HumanPoser:
         """Configurations (T, nq) of the model following a clip.
 
         Args:
-            keypoints: key-point -> (T, 3) world positions [m] (z up), e.g. ``keypoint_positions(motion)``.
+            keypoints: key-point -> (T, 3) world positions [m] (z up), e.g.
+                ``keypoint_positions(motion)``.
             orientations: ``waist``/``torso``/``head`` -> (T, 3, 3) world rotations relative to the
                 clip's rest pose facing +x (``keypoint_orientations(motion)``).
         """
