@@ -90,7 +90,7 @@ class Task(abc.ABC):
         self.presence = 1.0  # 0 while the target is missing, ramps back to 1
         self.dim = 0
         self.weight = np.zeros(0)
-        self._ff = None  # target velocity estimate (k,)
+        self._prev_target: tuple[Any, ...] | None = None  # last tick's target, for feedforward
         #: Where the task sits in the YAML (``tasks[i]``), for error messages.
         self.yaml_path = ""
         self.robot: RobotModel | None = None
@@ -119,7 +119,7 @@ class Task(abc.ABC):
     def reset(self, state: RobotState) -> None:
         """Set the target to the current value (zero error) and forget history."""
         self.presence = 1.0
-        self._ff = None
+        self._prev_target = None
 
     # ------------------------------------------------------------------ targets
     @abc.abstractmethod
@@ -158,6 +158,32 @@ class Task(abc.ABC):
         """Scalar error reported in :class:`StepResult` (Euclidean norm by default)."""
         return float(np.linalg.norm(error))
 
+    #: Attributes holding the target (replaced, never modified in place, by :meth:`set_target`):
+    #: what ``feedforward`` differentiates. Empty: the task has no feed-forward.
+    target_attributes: ClassVar[tuple[str, ...]] = ()
+
+    def target_velocity(self, state: RobotState, e: np.ndarray, dt: float) -> np.ndarray | None:
+        r"""Feed-forward :math:`\dot x_d` of Dariush 2009 eq. 9 / CRAC eq. 15 (backward difference).
+
+        The target's change over the last tick, measured in the task's own error coordinates:
+        :math:`\dot x_d \approx (e(x_{d,k}) - e(x_{d,k-1})) / dt` at the current state, which is
+        :math:`(x_{d,k} - x_{d,k-1}) / dt` for a position and the rotation vector of the
+        orientation change over :math:`dt` for an orientation. ``None`` on the first tick after
+        a reset and while the target does not change (a missing target keeps the old one).
+        """
+        current = tuple(getattr(self, a) for a in self.target_attributes)
+        prev, self._prev_target = self._prev_target, current
+        if prev is None or all(p is c for p, c in zip(prev, current, strict=True)):
+            return None
+        try:
+            for a, p in zip(self.target_attributes, prev, strict=True):
+                setattr(self, a, p)
+            e_prev = self.compute_error(state)
+        finally:
+            for a, c in zip(self.target_attributes, current, strict=True):
+                setattr(self, a, c)
+        return (e - e_prev) / dt
+
     def effective_gain(self, dt: float) -> float:
         """``K`` with ``K dt`` capped at 1."""
         k = 1.0 / dt if self.gain is None else self.gain
@@ -176,8 +202,10 @@ class Task(abc.ABC):
             np.multiply(e, k, out=v_star)
         else:
             v_star = e * k
-        if self.feedforward and self._ff is not None:
-            v_star += self._ff
+        if self.feedforward:
+            ff = self.target_velocity(state, e, dt)
+            if ff is not None:
+                v_star += ff
         w = self.weight
         if self.presence < 1.0:
             w = w * self.presence

@@ -27,6 +27,7 @@ class ComTask(Task):
     """
 
     drift_kind: ClassVar[str] = "com"
+    target_attributes: ClassVar[tuple[str, ...]] = ("target",)
 
     def __init__(
         self,

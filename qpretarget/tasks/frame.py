@@ -70,6 +70,7 @@ class FrameTask(Task):
     """
 
     drift_kind: ClassVar[str] = "analytic"
+    target_attributes: ClassVar[tuple[str, ...]] = ("position_target", "rotation_target")
 
     def __init__(
         self,
@@ -107,8 +108,6 @@ class FrameTask(Task):
         self.frame_id = -1
         self.position_target = np.zeros(3)
         self.rotation_target = np.eye(3)
-        self._prev_position: np.ndarray | None = None
-        self._prev_rotation: np.ndarray | None = None
 
     def bind(self, robot: RobotModel, *, path: str = "") -> None:
         self.frame_id = robot.frame_id(self.frame, path=f"{path}.frame" if path else "frame")
@@ -133,8 +132,6 @@ class FrameTask(Task):
         p, R = self.current_pose(state)
         self.position_target = p.copy()
         self.rotation_target = R.copy()
-        self._prev_position = None
-        self._prev_rotation = None
 
     def set_target(self, target: Any, *, tick: int | None = None) -> bool:
         """Set the target from a 3-vector, 3x3 rotation, 4x4 transform or ``pinocchio.SE3``.
@@ -154,7 +151,6 @@ class FrameTask(Task):
             # anywhere makes the sum non-finite.
             if not math.isfinite(sum(target.tolist())):
                 return False
-            self._prev_position = self.position_target
             self.position_target = target.astype(float, copy=True)
             return True
         position = rotation = None
@@ -205,10 +201,8 @@ class FrameTask(Task):
                 tick=tick,
             )
         if position is not None and self.has_position:
-            self._prev_position = self.position_target
             self.position_target = position
         if rotation is not None and self.has_orientation:
-            self._prev_rotation = self.rotation_target
             self.rotation_target = rotation
         return True
 
