@@ -108,6 +108,26 @@ _G1_STAND = {
     "right_elbow_joint": 0.9,
 }
 
+
+def _feet(
+    left: str, right: str, rectangle: tuple[float, float, float, float]
+) -> dict[str, FootDescription]:
+    """Both feet of a robot whose sole frames exist in its URDF, with one sole rectangle."""
+    return {
+        "left_foot": FootDescription(left, rectangle=rectangle),
+        "right_foot": FootDescription(right, rectangle=rectangle),
+    }
+
+
+def _keyframes(pelvis: str, torso: str, head: str, **sides: tuple[str, str]) -> dict[str, str]:
+    """Key-point frames: the trunk, then ``left_<part>`` and ``right_<part>`` of each ``part``."""
+    frames = {"pelvis": pelvis, "torso": torso, "head": head}
+    for part, (left, right) in sides.items():
+        frames[f"left_{part}"] = left
+        frames[f"right_{part}"] = right
+    return frames
+
+
 ROBOTS: dict[str, RobotDescription] = {
     "g1": RobotDescription(
         name="g1",
@@ -117,35 +137,26 @@ ROBOTS: dict[str, RobotDescription] = {
         reference_joints=_G1_STAND,
         feet={
             # The URDF's contact spheres sit 3 cm below the ankle roll link with radius 5 mm.
-            "left_foot": FootDescription(
-                "left_sole", "left_ankle_roll_link", (0.0, 0.0, -0.035), (-0.05, 0.12, -0.03, 0.03)
-            ),
-            "right_foot": FootDescription(
-                "right_sole",
-                "right_ankle_roll_link",
+            f"{side}_foot": FootDescription(
+                f"{side}_sole",
+                f"{side}_ankle_roll_link",
                 (0.0, 0.0, -0.035),
                 (-0.05, 0.12, -0.03, 0.03),
-            ),
+            )
+            for side in ("left", "right")
         },
-        keyframes={
-            "pelvis": "pelvis",
-            "torso": "torso_link",
-            "head": "mid360_link",
-            "left_shoulder": "left_shoulder_roll_link",
-            "right_shoulder": "right_shoulder_roll_link",
-            "left_elbow": "left_elbow_link",
-            "right_elbow": "right_elbow_link",
-            "left_wrist": "left_wrist_yaw_link",
-            "right_wrist": "right_wrist_yaw_link",
-            "left_hand": "left_rubber_hand",
-            "right_hand": "right_rubber_hand",
-            "left_hip": "left_hip_roll_link",
-            "right_hip": "right_hip_roll_link",
-            "left_knee": "left_knee_link",
-            "right_knee": "right_knee_link",
-            "left_ankle": "left_ankle_roll_link",
-            "right_ankle": "right_ankle_roll_link",
-        },
+        keyframes=_keyframes(
+            "pelvis",
+            "torso_link",
+            "mid360_link",
+            shoulder=("left_shoulder_roll_link", "right_shoulder_roll_link"),
+            elbow=("left_elbow_link", "right_elbow_link"),
+            wrist=("left_wrist_yaw_link", "right_wrist_yaw_link"),
+            hand=("left_rubber_hand", "right_rubber_hand"),
+            hip=("left_hip_roll_link", "right_hip_roll_link"),
+            knee=("left_knee_link", "right_knee_link"),
+            ankle=("left_ankle_roll_link", "right_ankle_roll_link"),
+        ),
         description="Unitree G1, 29 actuated DoF (g1_29dof_rev_1_0.urdf)",
     ),
     "icub": RobotDescription(
@@ -153,27 +164,18 @@ ROBOTS: dict[str, RobotDescription] = {
         urdf="icub_description/robots/icub_reduced.urdf",
         srdf="icub_description/srdf/icub.srdf",
         reference="half_sitting",
-        feet={
-            "left_foot": FootDescription("l_sole", rectangle=(-0.04, 0.10, -0.035, 0.035)),
-            "right_foot": FootDescription("r_sole", rectangle=(-0.04, 0.10, -0.035, 0.035)),
-        },
-        keyframes={
-            "pelvis": "root_link",
-            "torso": "chest",
-            "head": "head",
-            "left_shoulder": "l_shoulder_2",
-            "right_shoulder": "r_shoulder_2",
-            "left_elbow": "l_elbow_1",
-            "right_elbow": "r_elbow_1",
-            "left_wrist": "l_hand",
-            "right_wrist": "r_hand",
-            "left_hand": "l_gripper",
-            "right_hand": "r_gripper",
-            "left_knee": "l_lower_leg",
-            "right_knee": "r_lower_leg",
-            "left_ankle": "l_foot",
-            "right_ankle": "r_foot",
-        },
+        feet=_feet("l_sole", "r_sole", (-0.04, 0.10, -0.035, 0.035)),
+        keyframes=_keyframes(
+            "root_link",
+            "chest",
+            "head",
+            shoulder=("l_shoulder_2", "r_shoulder_2"),
+            elbow=("l_elbow_1", "r_elbow_1"),
+            wrist=("l_hand", "r_hand"),
+            hand=("l_gripper", "r_gripper"),
+            knee=("l_lower_leg", "r_lower_leg"),
+            ankle=("l_foot", "r_foot"),
+        ),
         description="iCub, reduced model (icub_reduced.urdf), SRDF half_sitting",
     ),
     "romeo": RobotDescription(
@@ -181,27 +183,18 @@ ROBOTS: dict[str, RobotDescription] = {
         urdf="romeo_description/urdf/romeo_small.urdf",
         srdf="romeo_description/srdf/romeo_small.srdf",
         reference="half_sitting",
-        feet={
-            "left_foot": FootDescription("l_sole", rectangle=(-0.077, 0.14, -0.069, 0.069)),
-            "right_foot": FootDescription("r_sole", rectangle=(-0.077, 0.14, -0.069, 0.069)),
-        },
-        keyframes={
-            "pelvis": "body",
-            "torso": "torso",
-            "head": "HeadRollLink",
-            "left_shoulder": "LShoulderYawLink",
-            "right_shoulder": "RShoulderYawLink",
-            "left_elbow": "LElbowRollLink",
-            "right_elbow": "RElbowRollLink",
-            "left_wrist": "l_wrist",
-            "right_wrist": "r_wrist",
-            "left_hand": "l_gripper",
-            "right_hand": "r_gripper",
-            "left_knee": "LKneePitchLink",
-            "right_knee": "RKneePitchLink",
-            "left_ankle": "l_ankle",
-            "right_ankle": "r_ankle",
-        },
+        feet=_feet("l_sole", "r_sole", (-0.077, 0.14, -0.069, 0.069)),
+        keyframes=_keyframes(
+            "body",
+            "torso",
+            "HeadRollLink",
+            shoulder=("LShoulderYawLink", "RShoulderYawLink"),
+            elbow=("LElbowRollLink", "RElbowRollLink"),
+            wrist=("l_wrist", "r_wrist"),
+            hand=("l_gripper", "r_gripper"),
+            knee=("LKneePitchLink", "RKneePitchLink"),
+            ankle=("l_ankle", "r_ankle"),
+        ),
         description="Aldebaran Romeo (romeo_small.urdf), SRDF half_sitting",
     ),
     "simple_humanoid": RobotDescription(
@@ -210,27 +203,18 @@ ROBOTS: dict[str, RobotDescription] = {
         srdf="simple_humanoid_description/srdf/simple_humanoid.srdf",
         # The SRDF's half_sitting puts four leg joints outside this URDF's limits: stand straight.
         reference=None,
-        feet={
-            "left_foot": FootDescription("l_ankle", rectangle=(-0.08, 0.12, -0.05, 0.05)),
-            "right_foot": FootDescription("r_ankle", rectangle=(-0.08, 0.12, -0.05, 0.05)),
-        },
-        keyframes={
-            "pelvis": "BODY",
-            "torso": "torso",
-            "head": "torso",
-            "left_shoulder": "LARM_LINK2",
-            "right_shoulder": "RARM_LINK2",
-            "left_elbow": "LARM_LINK4",
-            "right_elbow": "RARM_LINK4",
-            "left_wrist": "l_wrist",
-            "right_wrist": "r_wrist",
-            "left_hand": "l_wrist",
-            "right_hand": "r_wrist",
-            "left_knee": "LLEG_LINK4",
-            "right_knee": "RLEG_LINK4",
-            "left_ankle": "l_ankle",
-            "right_ankle": "r_ankle",
-        },
+        feet=_feet("l_ankle", "r_ankle", (-0.08, 0.12, -0.05, 0.05)),
+        keyframes=_keyframes(
+            "BODY",
+            "torso",
+            "torso",
+            shoulder=("LARM_LINK2", "RARM_LINK2"),
+            elbow=("LARM_LINK4", "RARM_LINK4"),
+            wrist=("l_wrist", "r_wrist"),
+            hand=("l_wrist", "r_wrist"),
+            knee=("LLEG_LINK4", "RLEG_LINK4"),
+            ankle=("l_ankle", "r_ankle"),
+        ),
         description="simple_humanoid (HRP-2-like test model), straight standing posture",
     ),
     "talos": RobotDescription(
@@ -238,29 +222,18 @@ ROBOTS: dict[str, RobotDescription] = {
         urdf="talos_data/robots/talos_reduced.urdf",
         srdf="talos_data/srdf/talos.srdf",
         reference="half_sitting",
-        feet={
-            "left_foot": FootDescription("left_sole_link", rectangle=(-0.11, 0.10, -0.069, 0.069)),
-            "right_foot": FootDescription(
-                "right_sole_link", rectangle=(-0.11, 0.10, -0.069, 0.069)
-            ),
-        },
-        keyframes={
-            "pelvis": "base_link",
-            "torso": "torso_2_link",
-            "head": "head_2_link",
-            "left_shoulder": "arm_left_2_link",
-            "right_shoulder": "arm_right_2_link",
-            "left_elbow": "arm_left_4_link",
-            "right_elbow": "arm_right_4_link",
-            "left_wrist": "arm_left_7_link",
-            "right_wrist": "arm_right_7_link",
-            "left_hand": "gripper_left_base_link",
-            "right_hand": "gripper_right_base_link",
-            "left_knee": "leg_left_4_link",
-            "right_knee": "leg_right_4_link",
-            "left_ankle": "leg_left_6_link",
-            "right_ankle": "leg_right_6_link",
-        },
+        feet=_feet("left_sole_link", "right_sole_link", (-0.11, 0.10, -0.069, 0.069)),
+        keyframes=_keyframes(
+            "base_link",
+            "torso_2_link",
+            "head_2_link",
+            shoulder=("arm_left_2_link", "arm_right_2_link"),
+            elbow=("arm_left_4_link", "arm_right_4_link"),
+            wrist=("arm_left_7_link", "arm_right_7_link"),
+            hand=("gripper_left_base_link", "gripper_right_base_link"),
+            knee=("leg_left_4_link", "leg_right_4_link"),
+            ankle=("leg_left_6_link", "leg_right_6_link"),
+        ),
         description="PAL Talos (talos_reduced.urdf), SRDF half_sitting",
     ),
 }
