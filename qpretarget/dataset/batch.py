@@ -379,6 +379,9 @@ def format_table(results: Sequence[ClipResult]) -> str:
     """The summary as a fixed-width table for the terminal."""
     head = f"{'clip':40s} {'status':8s} {'frames':>7s} {'hand mm':>8s} {'limits':>6s} "
     head += f"{'pen.fr':>6s} {'held':>5s} {'wall s':>7s}"
+    physics = any(r.physics for r in results)
+    if physics:
+        head += f" {'physics':>16s}"
     lines = [head, "-" * len(head)]
     for r in results:
         hands = [v for k, v in r.rmse_mm.items() if "hand" in k]
@@ -388,6 +391,9 @@ def format_table(results: Sequence[ClipResult]) -> str:
             f"{r.joint_limit_violations:6d} {r.penetrating_frames:6d} {r.held_ticks:5d} "
             f"{r.wall_time_s:7.1f}"
         )
+        if physics and r.physics:
+            ph = f"{r.physics['verdict']} {r.physics['survived'] * 100:.0f}%"
+            lines[-1] += f" {ph:>16s}"
         if r.error:
             lines.append(f"    error: {r.error}")
     return "\n".join(lines)

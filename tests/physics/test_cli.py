@@ -28,3 +28,10 @@ def test_batch_summary_physics_columns():
     cols, table = summary_rows(rows)
     assert "physics/verdict" in cols and "physics/survived" in cols
     assert table[0]["physics/survived"] == 1.0 and math.isnan(table[1]["physics/survived"])
+
+
+def test_batch_table_shows_the_verdict():
+    from qpretarget.dataset.batch import ClipResult, format_table
+
+    text = format_table([ClipResult("a.bvh", "ok", physics={"verdict": "falls", "survived": 0.3})])
+    assert "physics" in text.splitlines()[0] and "falls 30%" in text
