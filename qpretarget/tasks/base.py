@@ -131,6 +131,10 @@ class Task(abc.ABC):
             the controller calls :meth:`mark_missing`), ``True`` otherwise.
         """
 
+    def target_error(self, message: str, tick: int | None) -> TargetError:
+        """A :class:`TargetError` naming this task and ``tick`` (raised by :meth:`set_target`)."""
+        return TargetError(message, task=self.name, tick=tick)
+
     def mark_missing(self) -> None:
         """The target of this tick is missing (NaN): weight zero, then a smooth ramp back."""
         self.presence = 0.0

@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import ConfigError, TargetError
+from ..errors import ConfigError
 from ..robot import RobotModel, RobotState
 from .base import TASKS, Task
 
@@ -166,6 +166,18 @@ def shape_errors(
     return ShapeErrors(e_p, e_e, e_p + alpha * e_e)
 
 
+def _check_alpha(alpha: Any) -> float:
+    r""":math:`\alpha` of Tosun eq. 3 as a float; a ConfigError unless a finite number >= 0."""
+    if (
+        isinstance(alpha, bool)
+        or not isinstance(alpha, (int, float, np.floating, np.integer))
+        or not np.isfinite(alpha)
+        or alpha < 0
+    ):
+        raise ConfigError(f"alpha must be a finite number >= 0, got {alpha!r}.")
+    return float(alpha)
+
+
 @TASKS.register("chain_shape")
 class ChainShapeTask(Task):
     r"""Make a chain of robot frames take the normalized shape of a source chain (Tosun 2014).
@@ -228,20 +240,14 @@ class ChainShapeTask(Task):
             or n_samples < 1
         ):
             raise ConfigError(f"n_samples must be an integer >= 1, got {n_samples!r}.")
-        if (
-            isinstance(alpha, bool)
-            or not isinstance(alpha, (int, float, np.floating, np.integer))
-            or not np.isfinite(alpha)
-            or alpha < 0
-        ):
-            raise ConfigError(f"alpha must be a finite number >= 0, got {alpha!r}.")
+        alpha = _check_alpha(alpha)
         if reference_frame is not None and not isinstance(reference_frame, str):
             raise ConfigError(
                 f"reference_frame must be a frame name or null, got {reference_frame!r}."
             )
         self.frames = frames
         self.n_samples = int(n_samples)
-        self.alpha = float(alpha)
+        self.alpha = alpha
         self.reference_frame = reference_frame
         self.source_rotation_spec = source_rotation
         self.source_rotation = self._parse_rotation(source_rotation)
@@ -327,18 +333,16 @@ class ChainShapeTask(Task):
         try:
             arr = np.array(target, dtype=float)
         except (TypeError, ValueError):
-            raise TargetError(
+            raise self.target_error(
                 "target must be an (n, 3) array of source chain points, got "
                 f"{type(target).__name__}.",
-                task=self.name,
-                tick=tick,
+                tick,
             ) from None
         if arr.ndim != 2 or arr.shape[0] < 2 or arr.shape[1] != 3:
-            raise TargetError(
+            raise self.target_error(
                 f"target must be an (n, 3) array of n >= 2 source chain points (base first), "
                 f"got shape {arr.shape}.",
-                task=self.name,
-                tick=tick,
+                tick,
             )
         if not np.all(np.isfinite(arr)):
             return False
@@ -347,10 +351,8 @@ class ChainShapeTask(Task):
         try:
             samples = normalized_pose(arr, self.s)
         except ValueError:
-            raise TargetError(
-                "the source chain has zero total length (all its points coincide).",
-                task=self.name,
-                tick=tick,
+            raise self.target_error(
+                "the source chain has zero total length (all its points coincide).", tick
             ) from None
         self.source_points = arr
         self.source_samples = samples
@@ -363,14 +365,7 @@ class ChainShapeTask(Task):
         Raises:
             ConfigError: when ``alpha`` is not a finite number >= 0.
         """
-        if (
-            isinstance(alpha, bool)
-            or not isinstance(alpha, (int, float, np.floating, np.integer))
-            or not np.isfinite(alpha)
-            or alpha < 0
-        ):
-            raise ConfigError(f"alpha must be a finite number >= 0, got {alpha!r}.")
-        self.alpha = float(alpha)
+        self.alpha = _check_alpha(alpha)
         self.metric_weight[-3:] = self.alpha
         if self.weight.shape == self.metric_weight.shape:  # bound
             self.weight = self._base_weight * self.metric_weight

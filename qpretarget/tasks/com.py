@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
-from ..errors import ConfigError, TargetError
+from ..errors import ConfigError
 from ..robot import RobotModel, RobotState
 from .base import TASKS, Task
 
@@ -70,10 +70,8 @@ class ComTask(Task):
         try:
             arr = np.array(target, dtype=float)
         except (TypeError, ValueError):
-            raise TargetError(
-                f"CoM target must be numbers, got {type(target).__name__}.",
-                task=self.name,
-                tick=tick,
+            raise self.target_error(
+                f"CoM target must be numbers, got {type(target).__name__}.", tick
             ) from None
         if arr.shape == (3,):
             full = arr
@@ -81,11 +79,10 @@ class ComTask(Task):
             full = self.target.copy()
             full[self.rows] = arr
         else:
-            raise TargetError(
+            raise self.target_error(
                 f"CoM target must have shape (3,) or ({self.dim},) for axes {self.axes!r}, "
                 f"got {arr.shape}.",
-                task=self.name,
-                tick=tick,
+                tick,
             )
         if not np.all(np.isfinite(full[self.rows])):
             return False

@@ -20,7 +20,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
-from ..errors import ConfigError, TargetError
+from ..errors import ConfigError
 from ..robot import RobotModel, RobotState
 from ..validation import weight_vector
 from .base import TASKS, Task
@@ -160,11 +160,10 @@ class FrameTask(Task):
             try:
                 arr = np.array(target, dtype=float)
             except (TypeError, ValueError):
-                raise TargetError(
+                raise self.target_error(
                     f"target must be a 3-vector, 3x3 rotation, 4x4 transform or pinocchio.SE3, "
                     f"got {type(target).__name__}.",
-                    task=self.name,
-                    tick=tick,
+                    tick,
                 ) from None
             if arr.shape == (3,):
                 position = arr
@@ -173,32 +172,25 @@ class FrameTask(Task):
             elif arr.shape == (4, 4):
                 position, rotation = arr[:3, 3].copy(), arr[:3, :3].copy()
             else:
-                raise TargetError(
+                raise self.target_error(
                     f"target must be a 3-vector (position), a 3x3 rotation, a 4x4 transform or a "
                     f"pinocchio.SE3, got shape {arr.shape}.",
-                    task=self.name,
-                    tick=tick,
+                    tick,
                 )
         if position is not None and rotation is None and not self.has_position:
-            raise TargetError(
-                "a position was given to an orientation-only task (mode: orientation).",
-                task=self.name,
-                tick=tick,
+            raise self.target_error(
+                "a position was given to an orientation-only task (mode: orientation).", tick
             )
         if rotation is not None and position is None and not self.has_orientation:
-            raise TargetError(
-                "a rotation was given to a position-only task (mode: position).",
-                task=self.name,
-                tick=tick,
+            raise self.target_error(
+                "a rotation was given to a position-only task (mode: position).", tick
             )
         for x in (position, rotation):
             if x is not None and not np.isfinite(x).all():
                 return False
         if rotation is not None and not _is_rotation(rotation):
-            raise TargetError(
-                "rotation target is not a rotation matrix (R'R != I or det(R) != 1).",
-                task=self.name,
-                tick=tick,
+            raise self.target_error(
+                "rotation target is not a rotation matrix (R'R != I or det(R) != 1).", tick
             )
         if position is not None and self.has_position:
             self.position_target = position

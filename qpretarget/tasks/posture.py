@@ -13,7 +13,6 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
-from ..errors import TargetError
 from ..robot import RobotModel, RobotState
 from .base import TASKS, Task
 
@@ -79,25 +78,24 @@ class PostureTask(Task):
                 try:
                     j = robot.joint_index(jname)
                 except Exception as exc:
-                    raise TargetError(str(exc), task=self.name, tick=tick) from None
+                    raise self.target_error(str(exc), tick) from None
                 q[robot.joint_q_index[j]] = float(value)
         else:
             try:
                 arr = np.array(target, dtype=float)
             except (TypeError, ValueError):
-                raise TargetError(
-                    "posture target must be numbers or {joint: value}.", task=self.name, tick=tick
+                raise self.target_error(
+                    "posture target must be numbers or {joint: value}.", tick
                 ) from None
             if arr.shape == (robot.nq,):
                 q = arr
             elif arr.shape == (len(robot.joint_names),):
                 q[robot.joint_q_index] = arr
             else:
-                raise TargetError(
+                raise self.target_error(
                     f"posture target must have shape ({robot.nq},) (full q) or "
                     f"({len(robot.joint_names)},) (joints), got {arr.shape}.",
-                    task=self.name,
-                    tick=tick,
+                    tick,
                 )
         if not np.all(np.isfinite(q)):
             return False
@@ -127,7 +125,7 @@ class DampingTask(Task):
         self._zero = np.zeros(robot.nv)
 
     def set_target(self, target: Any, *, tick: int | None = None) -> bool:
-        raise TargetError("a damping task takes no target.", task=self.name, tick=tick)
+        raise self.target_error("a damping task takes no target.", tick)
 
     def compute_error(self, state: RobotState) -> np.ndarray:
         return self._zero
