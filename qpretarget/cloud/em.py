@@ -229,31 +229,17 @@ def e_step(
     log_out = math.log(mu / N) if mu > 0 else -np.inf
     if mode == "dense":
         sums = _dense_sums(S, Sn, B, A, idx_act, Mtot, sigma2, (log_in, log_out), use_n, chunk)
-        sums.pairs = pairs  # passed through unchanged
     elif mode == "kdtree":
-        sums = _kdtree_sums(
+        sums, pairs = _kdtree_sums(
             S, Sn, B, A, Afull, idx_act, Mtot, sigma2, (log_in, log_out), use_n, neighbors, pairs
         )
     else:
         raise ConfigError(f"estep must be 'kdtree' or 'dense', got {mode!r}.", path="em.estep")
-    return EStep(
-        sums.nll, sums.P1, sums.Px, sums.Pn, sums.wS2, sums.wN2, sums.Np, dim,
-        normal_weight if use_n else 0.0, normal_scale, sums.pairs,
-    )  # fmt: skip
+    return EStep(*sums, dim, normal_weight if use_n else 0.0, normal_scale, pairs)
 
 
-@dataclass
-class _Sums:
-    """Posterior sums of an E-step (the fields of :class:`EStep` it computes)."""
-
-    nll: float
-    P1: np.ndarray
-    Px: np.ndarray
-    Pn: np.ndarray | None
-    wS2: float
-    wN2: float
-    Np: float
-    pairs: np.ndarray | None = None
+#: What an E-step sums over the posteriors: nll, P1, Px, Pn, wS2, wN2, Np (see :class:`EStep`).
+_Sums = tuple[float, np.ndarray, np.ndarray, np.ndarray | None, float, float, float]
 
 
 def _log_posteriors(a: np.ndarray, log_in: float, log_out: float) -> tuple[np.ndarray, np.ndarray]:
@@ -306,7 +292,7 @@ def _dense_sums(
             Pn[idx_act] += np.einsum("nm,na->ma", post, Sn[lo : lo + chunk])
             wN2 += float(w @ n2[lo : lo + chunk])
         Np += float(w.sum())
-    return _Sums(nll, P1, Px, Pn if use_n else None, wS2, wN2, Np)
+    return nll, P1, Px, Pn if use_n else None, wS2, wN2, Np
 
 
 def _kdtree_sums(
@@ -322,7 +308,7 @@ def _kdtree_sums(
     use_n: bool,
     neighbors: int,
     pairs: np.ndarray | None,
-) -> _Sums:
+) -> tuple[_Sums, np.ndarray]:
     """E-step over each cloud point's ``neighbors`` nearest active template points or ``pairs``."""
     from scipy.spatial import cKDTree
 
@@ -353,7 +339,7 @@ def _kdtree_sums(
         Pn = np.stack([np.bincount(m, pf * Sn[rep, c], Mtot) for c in range(3)], axis=1)
         wN2 = float(w @ n2)
     s2 = np.einsum("na,na->n", S, S)
-    return _Sums(nll, P1, Px, Pn, float(w @ s2), wN2, float(w.sum()), pairs)
+    return (nll, P1, Px, Pn, float(w @ s2), wN2, float(w.sum())), pairs
 
 
 def visible_from(
