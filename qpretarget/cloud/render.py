@@ -26,6 +26,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigError
+from ..motion.calibration import KEYPOINT_TREE as STANDARD_TREE
 from .io import CloudFrame, CloudSequence, PinholeIntrinsics, depth_to_points
 from .meshes import LinkMeshes, load_link_meshes
 
@@ -291,26 +292,13 @@ def render_cloud(
 
 
 # ------------------------------------------------------------------------ the human model, posed
-#: Key-point tree used to re-proportion a clip to the human model: child -> parent.
+#: Key-point tree used to re-proportion a clip to the human model: child -> parent. The standard
+#: tree (:data:`~qpretarget.motion.calibration.KEYPOINT_TREE`) without the heels, and with the
+#: shoulders hung from the neck, a joint of the human model.
 KEYPOINT_TREE: dict[str, str] = {
-    "neck": "waist",
-    "head": "neck",
-    "left_shoulder": "neck",
-    "left_elbow": "left_shoulder",
-    "left_wrist": "left_elbow",
-    "left_hand": "left_wrist",
-    "right_shoulder": "neck",
-    "right_elbow": "right_shoulder",
-    "right_wrist": "right_elbow",
-    "right_hand": "right_wrist",
-    "left_hip": "waist",
-    "left_knee": "left_hip",
-    "left_ankle": "left_knee",
-    "left_toe": "left_ankle",
-    "right_hip": "waist",
-    "right_knee": "right_hip",
-    "right_ankle": "right_knee",
-    "right_toe": "right_ankle",
+    child: "neck" if child.endswith("_shoulder") else parent
+    for child, parent in STANDARD_TREE.items()
+    if parent is not None and not child.endswith("_heel")
 }
 
 #: Rotation of the human_description model (y up, x forward, z right) into a z-up world.
