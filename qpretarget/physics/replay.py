@@ -15,8 +15,8 @@ The *assisted* replay adds a virtual wrench on the floating base that pulls it t
 reference base pose: a MuJoCo weld equality between the base and a mocap body moved along the
 reference, a soft constraint (``solref = (0.1 s, 1)``, ``solimp`` impedance 0.1) that the
 constraint solver integrates implicitly; soft, so the feet carry the weight when they can (on a
-clip that stands unassisted the weld still takes about 10 % of the weight at p95: that is the
-floor of this measure). Its constraint force
+clip that stands unassisted the weld still takes about 10 % of the weight at p95, mostly
+horizontal, pulling the swaying base back: that is the floor of this measure). Its constraint force
 ``(f, n)`` is the effort the robot's own feet could not provide
 (:mod:`~qpretarget.physics.metrics` reports ``|f|`` as % of body weight and ``|n|``).
 
