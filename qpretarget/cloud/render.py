@@ -599,6 +599,19 @@ def human_clip_sequence(
     return syn, poser
 
 
+def _visible_joints(
+    meshes: LinkMeshes, points: np.ndarray, normals: np.ndarray, link: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points, normals and moving joint of the pixels that see a link (``link >= 0``).
+
+    The joint of a point is the pinocchio joint of its link's triangles.
+    """
+    ok = link >= 0
+    link_joint = np.zeros(len(meshes.link_names), dtype=int)
+    link_joint[meshes.link] = meshes.joint
+    return points[ok], normals[ok], link_joint[link[ok]]
+
+
 def joint_observability(
     model: pin.Model,
     data: pin.Data,
@@ -620,12 +633,7 @@ def joint_observability(
         (njoints,) values indexed by pinocchio joint id (0 for the universe and multi-DoF joints).
     """
     out = np.zeros(model.njoints)
-    ok = link >= 0
-    p, n, lk = points[ok], normals[ok], link[ok]
-    # Joint of each visible point: the joint of its link's triangles.
-    link_joint = np.zeros(len(meshes.link_names), dtype=int)
-    link_joint[meshes.link] = meshes.joint
-    pj = link_joint[lk]
+    p, n, pj = _visible_joints(meshes, points, normals, link)
     sub = {j: set(model.subtrees[j]) for j in range(model.njoints)}
     for j in range(1, model.njoints):
         jm = model.joints[j]
@@ -664,11 +672,7 @@ def joint_uncertainty(
     Returns:
         (nv,) standard deviations (large for coordinates the view cannot determine).
     """
-    ok = link >= 0
-    p, n, lk = points[ok], normals[ok], link[ok]
-    link_joint = np.zeros(len(meshes.link_names), dtype=int)
-    link_joint[meshes.link] = meshes.joint
-    pj = link_joint[lk]
+    p, n, pj = _visible_joints(meshes, points, normals, link)
     rows = np.zeros((len(p), model.nv))
     for j in np.unique(pj):
         sel = pj == j
