@@ -97,6 +97,10 @@ def run(args: argparse.Namespace) -> int:
     metrics = summarize(series, per_frame=not args.no_per_frame)
     human, reason = human_metrics_or_reason(traj)
     metrics["human"] = human if human is not None else {"unavailable": reason}
+    from ..analysis.mesh_audit import audit_lines, audit_run, plot_audit
+
+    audit = audit_run(traj.q, traj.make_controller().robot)  # every pair, whatever the config
+    metrics["mesh_self_collision"] = audit.to_dict() if audit else {"unavailable": "no geometry"}
     before = None
     if args.before:
         btraj = RobotTrajectory.load(args.before)
@@ -122,7 +126,11 @@ def run(args: argparse.Namespace) -> int:
         from ..analysis.plots import write_figures
 
         written += list(write_figures(series, out, before=before, joints=args.joints).values())
+        if audit:
+            written.append(plot_audit(audit, traj.t, out / "self_collision_all_pairs.png"))
     _print_summary(metrics)
+    print("\n".join(f"{'mesh collision' if i == 0 else '':16s} {x}"
+                    for i, x in enumerate(audit_lines(audit))))  # fmt: skip
     if args.physics:
         written += _physics(traj, args, out, metrics)
     print("wrote " + ", ".join(str(p) for p in written))
@@ -131,12 +139,18 @@ def run(args: argparse.Namespace) -> int:
 
 def _physics(traj: object, args: argparse.Namespace, out: Path, metrics: dict) -> list[Path]:
     """Replay in MuJoCo; write physics.json (+ figure); add a summary to metrics.json."""
+    import sys
+
     from ..fileio import write_atomic
     from ..physics.metrics import dumps, summary_row
     from ..physics.replay import check_run
 
     m, free, helped = check_run(
-        traj, gains=args.physics_gains, timestep=args.physics_timestep, assisted=not args.no_assist
+        traj,
+        gains=args.physics_gains,
+        timestep=args.physics_timestep,
+        assisted=not args.no_assist,
+        progress=sys.stderr.isatty(),
     )
     if not args.no_per_frame:
         from ..physics.metrics import per_frame_series

@@ -203,6 +203,7 @@ def replay_run(
     stop_on_fall: bool = True,
     fall_height: float | None = None,
     fall_tilt_deg: float | None = None,
+    progress: bool = False,
 ) -> ReplaySeries:
     """Replay ``traj`` (a :class:`~qpretarget.trajectory.RobotTrajectory`) on ``pm``.
 
@@ -215,6 +216,7 @@ def replay_run(
             :data:`~qpretarget.physics.metrics.FALL_HEIGHT_M`).
         fall_tilt_deg: fall when the torso tilts this far from the reference's [deg] (default
             :data:`~qpretarget.physics.metrics.FALL_TILT_DEG`).
+        progress: show a progress bar (frames).
 
     Raises:
         PhysicsInputError: the run does not match the robot (before any simulation).
@@ -283,8 +285,15 @@ def replay_run(
     f6 = np.zeros(6)
     fallen_at: int | None = None
     simulated = 1
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=T - 1, unit="frame", desc="assisted" if assisted else "physics")
     t0 = time.perf_counter()
     for k in range(1, T):
+        if bar is not None:
+            bar.update(1)
         dt = float(t[k] - t[k - 1])
         n_sub = max(1, int(round(dt / h0)))
         m.opt.timestep = dt / n_sub
@@ -358,6 +367,8 @@ def replay_run(
             if stop_on_fall:
                 break
     wall = time.perf_counter() - t0
+    if bar is not None:
+        bar.close()
     return ReplaySeries(
         t=t,
         assisted=assisted,
@@ -409,8 +420,18 @@ def check_run(
     gains: str | None = None,
     timestep: float | None = None,
     assisted: bool = True,
+    progress: bool = False,
 ) -> tuple[dict[str, Any], ReplaySeries, ReplaySeries | None]:
     """Build the model, replay the run unassisted (and assisted), return the metrics.
+
+    Args:
+        traj: the run (:class:`~qpretarget.trajectory.RobotTrajectory`).
+        robot: its robot model (default: built from the run's stored config).
+        pm: a model built beforehand (reused across runs of the same robot).
+        gains: gain profile name (default ``stiff``).
+        timestep: physics time step [s] (default 2 ms).
+        assisted: also run the assisted replay.
+        progress: progress bars.
 
     Returns:
         ``(metrics, unassisted series, assisted series or None)``; metrics as
@@ -429,6 +450,6 @@ def check_run(
             robot, gains=gains, timestep=timestep if timestep is not None else DEFAULT_TIMESTEP
         )
     joint_columns(traj, pm)
-    free = replay_run(traj, pm, assisted=False)
-    helped = replay_run(traj, pm, assisted=True) if assisted else None
+    free = replay_run(traj, pm, assisted=False, progress=progress)
+    helped = replay_run(traj, pm, assisted=True, progress=progress) if assisted else None
     return summarize(free, helped, pm), free, helped

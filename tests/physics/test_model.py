@@ -113,3 +113,33 @@ def test_talos_converts_and_stands_in_its_reference_posture():
     assert m["verdict"] == "ok"
     # Stiff servo, quiet stance: the base stays within 2 cm (measured 7 mm p95 over 2 s).
     assert m["unassisted"]["root_position_error_mm"]["p95"] < 20.0
+
+
+_URDF = """<robot name="t">
+  <link name="base"><inertial><mass value="1"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="arm"><inertial><mass value="1"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry>GEOM</geometry></collision></link>
+  <joint name="j" type="JTYPE"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="10" velocity="1"/></joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize(
+    ("geom", "jtype", "match"),
+    [
+        (
+            '<mesh filename="package://nowhere/arm.stl"/>',
+            "revolute",
+            r"link 'arm' <collision> mesh .* not found",
+        ),
+        ('<box size="0.1 0.1 0.1"/>', "planar", r"joint 'j' is of type 'planar'"),
+    ],
+)
+def test_unconvertible_urdf_element_is_named(tmp_path, geom, jtype, match):
+    from qpretarget.physics.model import rewrite_urdf
+
+    urdf = tmp_path / "t.urdf"
+    urdf.write_text(_URDF.replace("GEOM", geom).replace("JTYPE", jtype), encoding="utf-8")
+    with pytest.raises(PhysicsModelError, match=match):
+        rewrite_urdf(urdf)
