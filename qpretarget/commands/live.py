@@ -89,6 +89,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--resume-time", type=float, default=0.3, help="blend back into the stream after a hold [s]"
     )
+    p.add_argument(
+        "--max-lag",
+        type=float,
+        default=100.0,
+        help="skip the backlog when the oldest waiting datagram is older than this [ms]",
+    )
     p.add_argument("--duration", type=float, default=None, help="stop after this long [s]")
     p.add_argument(
         "--idle-exit", type=float, default=None, help="stop after this long without a datagram [s]"
@@ -115,7 +121,8 @@ def format_report(report: dict) -> str:
             f"{c['duplicates']} duplicates, {c['reordered']} reordered, {c['late']} late, "
             f"{s.get('malformed', 0)} malformed, {s.get('ignored', 0)} ignored",
             f"holds         {c['extrapolated']} extrapolated + {c['held_frames']} held frames, "
-            f"{c['held_ticks']} held ticks, {c['resumes']} resumes, {c['resyncs']} resyncs",
+            f"{c['held_ticks']} held ticks, {c['resumes']} resumes, {c['resyncs']} resyncs, "
+            f"{c['skipped']} samples skipped to catch up",
         ]
     )
 
@@ -128,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     from ..retarget import Retargeter
     from ..sources import LiveSession, UdpPublisher, open_source
 
-    for name in ("budget", "max_wait", "duration", "idle_exit", "capture_rate", "speed"):
+    for name in ("budget", "max_wait", "max_lag", "duration", "idle_exit", "capture_rate", "speed"):
         value = getattr(args, name)
         if value is not None and not value > 0:
             raise ConfigError(f"--{name.replace('_', '-')} must be positive, got {value}.")
@@ -158,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
         budget=None if args.budget is None else 1e-3 * args.budget,
         max_wait=None if args.max_wait is None else 1e-3 * args.max_wait,
         resume_time=args.resume_time,
+        max_lag=1e-3 * args.max_lag,
         record=record is not None,
         keypoint_map=args.keypoint_map,
     )

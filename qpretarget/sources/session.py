@@ -22,6 +22,11 @@ expected arrival of sample ``n`` is ``a_n = b + n / rate`` with ``b`` the lower 
   so the targets never jump. A sender whose sample counter restarted (or went back) after a hold
   is followed from its new number (a *resync*).
 
+**Falling behind.** When the oldest datagram waiting is older than ``max_lag`` (the loop was
+slower than the stream: a slow tick, a loaded machine), the backlog is **skipped**: the input jumps
+to the newest datagram and blends into it as after a hold, so latency stays bounded instead of
+growing with the queue.
+
 A datagram whose sample is already pushed is a **duplicate**; one that arrives after a higher
 sample but in time is **reordered** (and used); one whose slot was already filled in is **late**
 (dropped). Malformed datagrams are counted by the source.
@@ -56,7 +61,7 @@ from .publish import INPUT_KINDS, LiveCommand
 #: Counters of a live run (see the module docstring).
 COUNTERS = (
     "frames", "pushed", "lost", "duplicates", "reordered", "late", "extrapolated", "held_frames",
-    "resumes", "resyncs", "ticks", "held_ticks", "deadline_misses",
+    "resumes", "resyncs", "skipped", "ticks", "held_ticks", "deadline_misses",
 )  # fmt: skip
 
 
@@ -106,6 +111,7 @@ class LiveSession:
         max_wait: How long after its expected arrival a sample is declared missing [s]
             (default: two capture periods).
         resume_time: Blend time back into the stream after a hold [s].
+        max_lag: Age of the oldest waiting datagram beyond which the backlog is skipped [s].
         record: Keep every command and pushed frame for :meth:`save`.
         keypoint_map: Key-point map of the source's joints (default: the source's, else guessed).
         clock: Wall clock [s] (tests pass a fake one).
@@ -123,11 +129,12 @@ class LiveSession:
         budget: float | None = None,
         max_wait: float | None = None,
         resume_time: float = 0.3,
+        max_lag: float = 0.1,
         record: bool = True,
         keypoint_map: Any = None,
         clock: Callable[[], float] = time.time,
     ) -> None:
-        for name, value in (("budget", budget), ("max_wait", max_wait)):
+        for name, value in (("budget", budget), ("max_wait", max_wait), ("max_lag", max_lag)):
             if value is not None and not value > 0:
                 raise ConfigError(f"{name} must be a positive time [s], got {value!r}.")
         if not resume_time >= 0:
@@ -139,6 +146,8 @@ class LiveSession:
         self.budget = float(budget) if budget is not None else self.control_dt
         self._max_wait = max_wait
         self.resume_time = float(resume_time)
+        self.max_lag = float(max_lag)
+        self._catch_up = False
         self.record = record
         self.keypoint_map = keypoint_map
         self.clock = clock
@@ -310,6 +319,15 @@ class LiveSession:
         P = 1.0 / self.rate
         while True:
             n = self._next_seq
+            oldest = min((g.recv_time for g in self._buffer.values()), default=math.inf)
+            if max(now, self.clock()) - oldest > self.max_lag:
+                # Behind the stream: skip the backlog, blend into the newest datagram.
+                m = max(self._buffer)
+                self.counts["skipped"] += m - n
+                self._buffer = {m: self._buffer[m]}
+                self._overtaken.clear()
+                self._next_seq = n = m
+                self._catch_up = self._last is not None
             f = self._buffer.pop(n, None)
             if f is not None:
                 if n in self._overtaken:
@@ -354,10 +372,12 @@ class LiveSession:
         pos = np.asarray(f.positions, float)
         rot = None if f.orientations is None else np.asarray(f.orientations, float)
         kind = "live"
-        if self._synthetic_run > 0 and self._last is not None:
+        if (self._synthetic_run > 0 or self._catch_up) and self._last is not None:
             n_blend = max(1, round(self.resume_time * (self.rate or 1.0)))
             self._blend = (self._j, self._last, n_blend)
-            self.counts["resumes"] += 1
+            if self._synthetic_run > 0:
+                self.counts["resumes"] += 1
+        self._catch_up = False
         if self._blend is not None:
             j0, origin, n_blend = self._blend
             s = (self._j - j0 + 1) / n_blend

@@ -177,3 +177,16 @@ def test_bad_settings_are_refused(bad: dict[str, float]) -> None:
 
     with pytest.raises(ConfigError):
         LiveSession(Recorder(), FakeSource(), **bad)
+
+
+def test_a_backlog_older_than_max_lag_is_skipped() -> None:
+    s, rec = session()
+    s.max_lag = 0.05
+    deliver(s, list(range(5)))
+    # The loop stalled: samples 5..19 all arrived meanwhile, the oldest 0.15 s ago.
+    s.feed([frame(k, k * P) for k in range(5, 20)])
+    s.advance(0.2)
+    assert s.counts["skipped"] == 14 and s.counts["resumes"] == 0
+    assert len(rec.pushed) == 6  # straight to the newest, blending into it
+    x = pushed_x(rec)
+    assert x[4] < x[5] < pose(19)[0][0, 0]

@@ -29,7 +29,8 @@ def run_pair(tmp_path: Path, config: Path, clip: Path, stream_args: list[str]) -
     record = tmp_path / "live.npz"
     live = subprocess.Popen(
         [sys.executable, "-m", "qpretarget", "live", str(config), "--source", "xsens:0",
-         "--capture-rate", str(CAPTURE), "--max-wait", "100", "--record", str(record),
+         "--capture-rate", str(CAPTURE), "--max-wait", "100", "--max-lag", "10000",
+         "--record", str(record),
          "--json", "--quiet"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
