@@ -352,9 +352,9 @@ class LiveSession:
                                                   self._buffer[m].orientations), w)  # fmt: skip
                 self.counts["lost"] += 1
                 self._push(pos, rot, "interpolated", deadline, synthetic=False)
-            elif self._last is None:
-                return
-            elif self._synthetic_run == 0 and self._prev is not None:
+            elif self._prev is None:
+                return  # fewer than two frames yet: nothing to extrapolate or hold, wait
+            elif self._synthetic_run == 0:
                 pos, rot = self._extrapolate()
                 self.counts["extrapolated"] += 1
                 self._push(pos, rot, "extrapolated", deadline, synthetic=True)
