@@ -93,6 +93,10 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     pairs = _pairs(args.pairs)
     traj = RobotTrajectory.load(args.run)
+    if args.physics:  # a missing or old mujoco is said before any work
+        from ..physics.model import import_mujoco
+
+        import_mujoco()
     series = compute_series(traj, pairs=pairs, safety_distance=args.safety_distance)
     metrics = summarize(series, per_frame=not args.no_per_frame)
     human, reason = human_metrics_or_reason(traj)

@@ -39,6 +39,9 @@ from .gains import (
     STIFF_ERROR_AT_LIMIT,
 )
 
+#: Oldest mujoco with the model-editing API used here (``MjSpec.joint(name)``); tested with
+#: 3.3.7 and 4.0.0.
+MIN_MUJOCO = (3, 3)
 #: Mesh formats MuJoCo reads (lower-case suffixes).
 MESH_SUFFIXES = (".stl", ".obj", ".msh")
 #: Physics time step [s] (MuJoCo's default; Unitree's and mjlab's G1 models use 2-5 ms).
@@ -62,6 +65,13 @@ def import_mujoco() -> Any:
         import mujoco
     except ImportError:
         raise missing_dependency("physics", "the physics check (--physics)") from None
+    version = tuple(int(x) for x in mujoco.__version__.split(".")[:2] if x.isdigit())
+    if version < MIN_MUJOCO:
+        raise missing_dependency(
+            "physics",
+            f"the physics check needs mujoco >= {MIN_MUJOCO[0]}.{MIN_MUJOCO[1]} (found "
+            f"{mujoco.__version__}); it",
+        )
     return mujoco
 
 

@@ -28,7 +28,9 @@ def checked(run, g1_physics):
 def test_static_balance_run_survives_unassisted(checked):
     m, free, helped = checked
     u = m["unassisted"]
-    assert u["survived_fraction"] == 1.0 and m["verdict"] == "ok"
+    assert u["survived_fraction"] == 1.0 and m["verdict"] in ("ok", "saturates")
+    # The base stays on the reference (measured 20-40 mm p95: the servoed body sways).
+    assert u["root_position_error_mm"]["p95"] < 100.0
     # Stiff servo: joints follow to a fraction of a degree (measured 0.3 deg RMS).
     assert u["joint_tracking_rms_deg"]["overall"] < 1.0
     # Both feet planted: they carry the weight (mean 98-100 %; 90 % leaves room for the
