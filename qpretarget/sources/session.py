@@ -359,6 +359,7 @@ class LiveSession:
                 self.counts["extrapolated"] += 1
                 self._push(pos, rot, "extrapolated", deadline, synthetic=True)
             else:
+                assert self._last is not None
                 pos, rot = self._last
                 self.counts["held_frames"] += 1
                 self._push(pos, rot, "held", deadline, synthetic=True)

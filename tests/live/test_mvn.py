@@ -135,3 +135,20 @@ def test_segments_of_a_real_clip(mocap_dir) -> None:
     R = mvn.quat_to_matrix(Q[:, names.index("Hips")])
     np.testing.assert_allclose(R, motion.joint_orientation("root"), atol=1e-12)
     assert np.all(np.isfinite(P))
+
+
+def test_stream_resampling() -> None:
+    from qpretarget.commands.stream import resample_poses
+
+    t = np.arange(13) / 120.0
+    P = np.random.default_rng(8).normal(size=(13, 23, 3))
+    Q = mvn.matrix_to_quat(_random_rotations(13 * 23, 9)).reshape(13, 23, 4)
+    same = resample_poses(t, P, Q, 120.0)
+    assert same[0] is t and same[1] is P  # the clip's own samples at its own rate
+    t60, P60, Q60 = resample_poses(t, P, Q, 60.0)
+    np.testing.assert_allclose(t60, t[::2], atol=1e-12)
+    np.testing.assert_allclose(P60, P[::2], atol=1e-12)  # every other frame (1e-12: weights 0/1)
+    np.testing.assert_allclose(np.abs(np.sum(Q60 * Q[::2], axis=-1)), 1.0, atol=1e-12)
+    t100, P100, _ = resample_poses(t, P, Q, 100.0)
+    k = 3  # t = 0.03 s lies 60 % of the way from frame 3 to frame 4 of the 120 Hz clip
+    np.testing.assert_allclose(P100[k], 0.4 * P[3] + 0.6 * P[4], atol=1e-12)
