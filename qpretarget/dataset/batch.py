@@ -25,7 +25,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -152,10 +152,11 @@ def make_jobs(
         stem = out / rel.parent / rel.stem
         jobs.append(
             ClipJob(
-                str(clip), str(stem), str(config.resolve()), sha, tuple(formats), fps, force, audit,
-                physics,
-            )  # fmt: skip
+                str(clip), str(stem), str(config.resolve()), sha, tuple(formats), fps, force, audit
+            )
         )
+    if physics:
+        jobs = [replace(j, physics=True) for j in jobs]
     return jobs
 
 
@@ -256,13 +257,28 @@ def _retarget_and_export(job: ClipJob) -> ClipResult:
         row.penetrating_frames = audit.penetrating_frames
         row.min_pair_distance_mm = audit.min_distance_mm
     if job.physics:
-        from ..physics.metrics import summary_row
-        from ..physics.replay import check_run
-
-        row.physics = summary_row(check_run(run, robot=controller.robot)[0])
+        row.physics = _physics(run, controller.robot, job.stem, row.outputs)
     manifest = {"config_sha256": job.config_sha256, "outputs": row.outputs, "row": asdict(row)}
     write_atomic(_manifest_path(job), lambda f: f.write(json.dumps(manifest)), binary=False)
     return row
+
+
+def _physics(run: Any, robot: Any, stem: str, outputs: list[str]) -> dict[str, Any]:
+    """MuJoCo replay of a clip: ``<stem>.physics.json`` and ``.png``; the summary columns."""
+    from ..physics.metrics import dumps, per_frame_series, summary_row
+    from ..physics.replay import check_run
+
+    metrics, free, helped = check_run(run, robot=robot)
+    metrics["per_frame"] = per_frame_series(free, helped)
+    text = dumps(metrics)
+    outputs.append(str(write_atomic(stem + ".physics.json", lambda f: f.write(text), binary=False)))
+    try:
+        from ..physics.plots import write_figure
+
+        outputs.append(str(write_figure(free, helped, stem + ".physics.png", Path(stem).name)))
+    except ImportError:  # matplotlib missing: the metrics are written, the figure is not
+        pass
+    return summary_row(metrics)
 
 
 # ---------------------------------------------------------------------------------- engines

@@ -33,12 +33,18 @@ def static_config(configs_dir: Path, tmp: Path) -> Path:
 
 
 @pytest.fixture(scope="session")
-def drink_run(tmp_path_factory, configs_dir, mocap_dir) -> Path:
+def static_cfg(tmp_path_factory, configs_dir) -> Path:
+    """The static-balance G1 config with a 2 s start ramp (a file in a temporary folder)."""
+    return static_config(configs_dir, tmp_path_factory.mktemp("physics_cfg"))
+
+
+@pytest.fixture(scope="session")
+def drink_run(tmp_path_factory, static_cfg, mocap_dir) -> Path:
     """CMU 14_37 (drink soda), first 3 s, retargeted to the G1 with the static-balance config."""
     from qpretarget.cli import main
 
     tmp = tmp_path_factory.mktemp("physics")
-    cfg = static_config(configs_dir, tmp)
+    cfg = static_cfg
     out = tmp / "drink.npz"
     clip = mocap_dir / "cmu_14_37_drink_soda.bvh"
     assert main(["retarget", str(cfg), str(clip), "-o", str(out), "--end", "3.0", "--quiet"]) == 0

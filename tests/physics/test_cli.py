@@ -35,3 +35,18 @@ def test_batch_table_shows_the_verdict():
 
     text = format_table([ClipResult("a.bvh", "ok", physics={"verdict": "falls", "survived": 0.3})])
     assert "physics" in text.splitlines()[0] and "falls 30%" in text
+
+
+def test_batch_physics_end_to_end(tmp_path, static_cfg, mocap_dir):
+    """One real clip through `qpretarget batch --physics`: per-clip JSON + figure, summary columns."""
+    import csv
+
+    cfg = static_cfg
+    out = tmp_path / "out"
+    clip = mocap_dir / "cmu_14_37_drink_soda.bvh"
+    argv = ["batch", str(cfg), str(clip), "-o", str(out), "--physics", "--no-audit", "--quiet"]
+    assert main([*argv, "--workers", "1"]) == 0
+    assert (out / "cmu_14_37_drink_soda.physics.json").is_file()
+    assert (out / "cmu_14_37_drink_soda.physics.png").is_file()
+    (row,) = list(csv.DictReader((out / "summary.csv").open()))
+    assert float(row["physics/survived"]) == 1.0
