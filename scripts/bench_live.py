@@ -29,6 +29,7 @@ from qpretarget.analysis.benchmark import machine_info
 from qpretarget.control.controller import Controller
 from qpretarget.retarget import Retargeter
 from qpretarget.sources import LiveSession, UdpPublisher
+from qpretarget.sources.session import set_realtime
 from qpretarget.sources.xsens import XsensSource
 from qpretarget.yamlio import load_yaml
 
@@ -88,7 +89,10 @@ def main() -> None:
     ap.add_argument("--capture-rate", type=float, default=120.0, help="stream rate [Hz]")
     ap.add_argument("--rate", type=float, default=None, help="control rate [Hz] (default 1/dt)")
     ap.add_argument("--seconds", type=float, default=None, help="excerpt length (default all)")
+    ap.add_argument("--realtime", action="store_true", help="receive loop under SCHED_FIFO 50")
     args = ap.parse_args()
+    if args.realtime:
+        set_realtime(50)
     info = machine_info()
     print(f"machine: {info.get('cpu', '?')}, {os.cpu_count()} cores, "
           f"load average {os.getloadavg()[0]:.2f} at start")  # fmt: skip

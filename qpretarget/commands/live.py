@@ -95,6 +95,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=100.0,
         help="skip the backlog when the oldest waiting datagram is older than this [ms]",
     )
+    p.add_argument(
+        "--realtime",
+        type=int,
+        nargs="?",
+        const=50,
+        default=None,
+        metavar="PRIORITY",
+        help="run the loop under the real-time FIFO scheduler (Linux; default priority 50)",
+    )
     p.add_argument("--duration", type=float, default=None, help="stop after this long [s]")
     p.add_argument(
         "--idle-exit", type=float, default=None, help="stop after this long without a datagram [s]"
@@ -134,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
     from ..fileio import check_output_file
     from ..retarget import Retargeter
     from ..sources import LiveSession, UdpPublisher, open_source
+    from ..sources.session import set_realtime
 
     for name in ("budget", "max_wait", "max_lag", "duration", "idle_exit", "capture_rate", "speed"):
         value = getattr(args, name)
@@ -169,6 +179,8 @@ def run(args: argparse.Namespace) -> int:
         record=record is not None,
         keypoint_map=args.keypoint_map,
     )
+    if args.realtime is not None:
+        set_realtime(args.realtime)
     tty = sys.stderr.isatty()
 
     def status(s: LiveSession) -> None:

@@ -135,3 +135,10 @@ def test_command_errors_are_one_line(tmp_path: Path, configs_dir: Path, capsys) 
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert msg in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_realtime_priority_is_checked() -> None:
+    from qpretarget.sources.session import set_realtime
+
+    with pytest.raises(ConfigError, match="1..99"):
+        set_realtime(0)
