@@ -15,6 +15,7 @@ time is the first axis of offline arrays.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -35,6 +36,29 @@ def _hold_nan(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     held[index < 0] = np.nan
     first_valid = np.where(valid.any(axis=0), valid.argmax(axis=0), x.shape[0])
     return held, first_valid
+
+
+def _per_valid_segment(
+    x: npt.ArrayLike, run: Callable[[int, np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """Filter ``(T, ...)`` samples from each component's first valid sample on, NaNs held.
+
+    Components whose first valid sample is the same ``start`` are filtered together:
+    ``run(start, segment)`` maps the ``(T - start, n)`` held samples to their filtered values.
+    Samples before ``start`` (and components never valid) stay NaN.
+    """
+    x = np.asarray(x, dtype=float)
+    held, first = _hold_nan(x)
+    out = np.full_like(x, np.nan)
+    flat_x = held.reshape(x.shape[0], -1)
+    flat_out = out.reshape(x.shape[0], -1)
+    flat_first = np.asarray(first).reshape(-1)
+    for start in np.unique(flat_first):
+        if start >= x.shape[0]:
+            continue
+        columns = np.nonzero(flat_first == start)[0]
+        flat_out[start:, columns] = run(start, flat_x[start:, columns])
+    return out
 
 
 class Butterworth:
@@ -170,20 +194,12 @@ class Butterworth:
         Returns:
             ``(T, ...)`` filtered samples.
         """
-        x = np.asarray(x, dtype=float)
-        held, first = _hold_nan(x)
-        out = np.full_like(x, np.nan)
-        flat_x = held.reshape(x.shape[0], -1)
-        flat_out = out.reshape(x.shape[0], -1)
-        flat_first = np.asarray(first).reshape(-1)
-        for start in np.unique(flat_first):
-            if start >= x.shape[0]:
-                continue
-            columns = np.nonzero(flat_first == start)[0]
-            segment = flat_x[start:, columns]
+
+        def run(start: int, segment: np.ndarray) -> np.ndarray:
             zi = self.zi[:, None] * segment[0][None, :]
-            flat_out[start:, columns], _ = signal.lfilter(self.b, self.a, segment, axis=0, zi=zi)
-        return out
+            return signal.lfilter(self.b, self.a, segment, axis=0, zi=zi)[0]
+
+        return _per_valid_segment(x, run)
 
     def filtfilt(self, x: npt.ArrayLike) -> np.ndarray:
         """Offline zero-phase filtering along axis 0 (``scipy.signal.filtfilt``, odd padding).
@@ -198,25 +214,17 @@ class Butterworth:
         Raises:
             ValueError: If a component has too few valid samples for the padding.
         """
-        x = np.asarray(x, dtype=float)
-        held, first = _hold_nan(x)
-        out = np.full_like(x, np.nan)
-        flat_x = held.reshape(x.shape[0], -1)
-        flat_out = out.reshape(x.shape[0], -1)
-        flat_first = np.asarray(first).reshape(-1)
         padlen = 3 * (self.order + 1)
-        for start in np.unique(flat_first):
-            if start >= x.shape[0]:
-                continue
-            columns = np.nonzero(flat_first == start)[0]
-            segment = flat_x[start:, columns]
+
+        def run(start: int, segment: np.ndarray) -> np.ndarray:
             if segment.shape[0] <= padlen:
                 raise ValueError(
                     f"filtfilt needs more than {padlen} samples, got {segment.shape[0]} "
                     f"(from sample {start}); use lfilter for short signals"
                 )
-            flat_out[start:, columns] = signal.filtfilt(self.b, self.a, segment, axis=0)
-        return out
+            return signal.filtfilt(self.b, self.a, segment, axis=0)
+
+        return _per_valid_segment(x, run)
 
 
 class CardinalSpline:
