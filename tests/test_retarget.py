@@ -12,7 +12,6 @@ import pinocchio as pin
 import pytest
 import yaml
 
-from qpretarget.commands.demo import demo_controller
 from qpretarget.control.controller import Controller
 from qpretarget.errors import ConfigError
 from qpretarget.motion import HumanMotion, load_motion
@@ -48,15 +47,13 @@ def _clip(name: str, start: float, end: float) -> HumanMotion:
 
 @pytest.fixture(scope="module")
 def whole_body() -> Controller:
-    """configs/g1_whole_body.yaml with the tasks stepping needs (CoM, soles), as `demo` uses it."""
-    controller, source = demo_controller("g1")
-    print(f"whole-body controller: {source}")
-    return controller
+    """configs/g1_whole_body_static.yaml: the static balance mode (Poubel 2014 Table I)."""
+    return Controller.from_yaml(REPO / "configs" / "g1_whole_body_static.yaml")
 
 
 @pytest.fixture(scope="module")
 def g1_whole_body() -> Controller:
-    """configs/g1_whole_body.yaml as it is (both feet planted), or the generated whole-body one."""
+    """configs/g1_whole_body.yaml as it is (kinematic stepping), or the generated whole-body one."""
     path = REPO / "configs" / "g1_whole_body.yaml"
     if path.is_file() and yaml.safe_load(path.read_text()).get("retarget"):
         return Controller.from_yaml(path)

@@ -108,7 +108,9 @@ class SupportPhaseDetector:
         **kwargs: Fields of :class:`PhaseThresholds` when ``thresholds`` is ``None``.
 
     Attributes:
-        phase: Current phase (``"double"``, ``"left"``, ``"right"``).
+        phase: Current phase (``"double"``, ``"left"``, ``"right"``); in flight (no foot in
+            support) the last one is kept and :attr:`flight` is ``True``.
+        flight: Neither foot is in support (a jump, the flight phase of running).
         height: side -> last foot height above the ground [m].
         speed: side -> last foot speed [m/s].
     """
@@ -128,9 +130,15 @@ class SupportPhaseDetector:
         self._prev: dict[str, list[list[float]]] = {}
         self._t_prev: float | None = None
         self._support = {"left": True, "right": True}
+        self.flight = False
         self._pending: dict[str, float | None] = {"left": None, "right": None}
         self.height = {"left": 0.0, "right": 0.0}
         self.speed = {"left": 0.0, "right": 0.0}
+
+    @property
+    def feet(self) -> dict[str, bool]:
+        """Side -> the foot is in support (after hysteresis and ``min_duration``)."""
+        return dict(self._support)
 
     def update(self, t: float, left: npt.ArrayLike, right: npt.ArrayLike) -> str:
         """Add one sample of both feet; return the phase.
@@ -193,6 +201,7 @@ class SupportPhaseDetector:
                 self._pending[side] = None
         self._t_prev = t
         left_on, right_on = self._support["left"], self._support["right"]
+        self.flight = not (left_on or right_on)
         if left_on and right_on:
             self.phase = "double"
         elif left_on:

@@ -143,11 +143,15 @@ class RobotBinding:
         kp: Mapping[str, np.ndarray],
         rots: Mapping[str, np.ndarray],
         missing: Mapping[str, bool],
+        first: dict[str, tuple[np.ndarray | None, np.ndarray | None]] | None = None,
     ) -> None:
         """Write the targets of the bound tasks into ``targets`` (see the module docstring).
 
         A pose task whose orientation (or position) is missing keeps tracking the other half;
-        a missing half keeps its last target.
+        a missing half keeps its last target. With ``first`` (a dict filled on the first call),
+        the start ramp blends out the offset between the reference pose and the first target
+        instead of the target itself: the person's motion is followed from the first sample
+        (a clip that starts walking keeps its first steps' travel).
         """
         cal = calibration
         orient: dict[str, np.ndarray] = {}
@@ -167,7 +171,11 @@ class RobotBinding:
                     R_t = np.full((3, 3), np.nan)
                 else:
                     R_t = cal.rotation @ Rh @ self.unheading @ R_ref
-                    if ramp < 1.0:
+                    if first is not None:
+                        R0 = first.setdefault(name, (None, R_t.copy()))[1]
+                        if ramp < 1.0 and R0 is not None:
+                            R_t = pin.exp3((1.0 - ramp) * pin.log3(R_ref @ R0.T)) @ R_t
+                    elif ramp < 1.0:
                         R_t = R_ref @ pin.exp3(ramp * pin.log3(R_ref.T @ R_t))
             p_t = None
             if b.keypoint is not None:
@@ -182,7 +190,17 @@ class RobotBinding:
                     if R_t is not None and np.all(np.isfinite(R_t)):
                         off = R_t @ R_ref.T @ off
                     p_t = scaled[k] + off
-                    if ramp < 1.0:
+                    if first is not None:
+                        R0, p0 = first.get(name, (None, None))[1], None
+                        entry = first.get(f"{name}/p")
+                        if entry is None:
+                            first[f"{name}/p"] = (p_t.copy(), None)
+                            p0 = p_t
+                        else:
+                            p0 = entry[0]
+                        if ramp < 1.0 and p0 is not None:
+                            p_t = p_t + (1.0 - ramp) * (p_ref - p0)
+                    elif ramp < 1.0:
                         p_t = p_ref + ramp * (p_t - p_ref)
             p_ok = p_t is not None and bool(np.all(np.isfinite(p_t)))
             R_ok = R_t is not None and bool(np.all(np.isfinite(R_t)))

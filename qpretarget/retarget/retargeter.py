@@ -44,6 +44,7 @@ The ``retarget:`` section (validated here, documented in ``docs/retargeting.md``
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
@@ -51,10 +52,12 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import pinocchio as pin
 
+from ..constraints.contacts import Contacts
 from ..control.controller import Controller
 from ..errors import ConfigError
-from ..motion.calibration import Calibration, calibrate, nearest_rotation
+from ..motion.calibration import Calibration, calibrate, nearest_rotation, yaw_of
 from ..motion.human_motion import HumanMotion, MotionError
 from ..motion.keypoints import (
     KEYPOINT_NAMES,
@@ -73,8 +76,9 @@ from .spec import (
     _number,
     default_robot_keypoints,
 )
+from .stepping import KinematicStepper, StepCommand
 from .stream import Command, KeypointStream, iter_frames
-from .support import FOOT_POINTS, ComEstimate, FootSupport
+from .support import FOOT_POINTS, ComEstimate, FootSupport, rot_z
 from .whole_body import whole_body_config
 
 
@@ -136,7 +140,7 @@ class Retargeter:
         self._unheading = b.unheading
         self.com_estimate = ComEstimate(b.robot_map, b.robot_points, b.point_ids, b.com_reference)
         #: The controller's ``contacts`` constraint (its active feet are recorded in the run).
-        self.contacts = next((c for c in ctrl.constraints if hasattr(c, "set_contacts")), None)
+        self.contacts = next((c for c in ctrl.constraints if isinstance(c, Contacts)), None)
         # Support: soles, ankle -> sole transforms, foot task frames.
         self.support = self.spec.support
         self.feet: FootSupport | None = None
@@ -376,7 +380,17 @@ class Retargeter:
         self.detector = SupportPhaseDetector(
             self.support.detection if self.support is not None else PhaseThresholds()
         )
-        self.sequencer = self.feet.sequencer(self.dt) if self.feet is not None else None
+        static = self.support is not None and self.support.mode == "static"
+        self.sequencer = self.feet.sequencer(self.dt) if self.feet and static else None
+        self.stepper = (
+            KinematicStepper(self.support.stepping, dt=self.dt)
+            if self.support is not None and not static
+            else None
+        )
+        self._flight_root: tuple[np.ndarray, np.ndarray] | None = None
+        self._last_foot_yaw: dict[str, float] = {}
+        self._first_targets: dict[str, tuple[np.ndarray | None, np.ndarray | None]] = {}
+        self._last_waist: tuple[np.ndarray, np.ndarray] | None = None
         if self.support is not None:
             ctrl.set_contacts([fb.contact for fb in self.support.feet.values()])
         self._t_first: float | None = t0
@@ -400,6 +414,14 @@ class Retargeter:
             robot_foot_rotations=foot_R,
         )
         self.scaler = Scaler(self.calibration, self.spec.scaling)
+        cal = self.calibration
+        legs = [f"{side}_{p}" for side in SIDES for p in ("knee", "ankle")]
+        robot_l = sum(cal.robot_lengths.get(k, math.nan) for k in legs)
+        human_l = sum(cal.human_lengths.get(k, math.nan) for k in legs)
+        #: Leg-length ratio robot / person (the scale of heights in the kinematic mode).
+        self._leg_scale = robot_l / human_l if human_l > 0 else cal.root_scale
+        if not math.isfinite(self._leg_scale):
+            self._leg_scale = cal.root_scale
         # Waist yaw at calibration (feet yaw fallback when the motion has no toes).
         first = unpacked[0]
         self._waist_yaw_cal = waist_yaw(first[0], first[1])
@@ -438,6 +460,8 @@ class Retargeter:
                    for s in SIDES}  # fmt: skip
             if pts["left"] and pts["right"]:
                 phase = self.detector.update(t, np.array(pts["left"]), np.array(pts["right"]))
+                if self.stepper is not None and self.detector.flight:
+                    phase = "flight"
 
         # 2. Scaling rooted at the robot's supporting feet (Poubel 2014 III.A), blended at
         #    root switches, legs kept off the straight-knee singularity.
@@ -470,16 +494,24 @@ class Retargeter:
                 shift = np.array([cmd.com[0] - reference[0], cmd.com[1] - reference[1], 0.0])
                 scaled = {k: (v if k in FOOT_POINTS else v + shift) for k, v in scaled.items()}
 
+        # 3'. Kinematic stepping: each foot's contact follows the person's foot.
+        if self.stepper is not None:
+            cmd = self._step(t, scaled, kp, rots)
+            support_state = cmd.label
+
         # 4. Task targets (ramped in from the reference posture over ramp_time).
+        first = self._first_targets if self.stepper is not None else None
+        ramp = self._ramp(t)
         self.binding.task_targets(
-            targets, cal, self._targets_ref, self._ramp(t), self._skipped, scaled, kp, rots, missing
+            targets, cal, self._targets_ref, ramp, self._skipped, scaled, kp, rots, missing, first
         )
-        if cmd is not None:
+        if cmd is not None and self.support.com_task is not None and self.sequencer is not None:
             com_task = ctrl.tasks[self.support.com_task]
             full = np.array(com_task.target, float)
             ramp = self._ramp(t)
             full[:2] = self.com_reference[:2] + ramp * (cmd.com - self.com_reference[:2])
             targets[self.support.com_task] = full
+        if cmd is not None:
             for side, sole in cmd.feet.items():
                 task_name = self.support.feet[side].task
                 M = sole * self.feet.sole_to_task[side]
@@ -498,7 +530,26 @@ class Retargeter:
     ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """Scaled key-points and the supporting ankles they are rooted at."""
         cal, state = self.calibration, self.controller.state
-        if self.sequencer is not None:
+        if self.stepper is not None:
+            # Rooted at the robot's standing feet the person stands on too (Poubel 2014 eq. 1
+            # from the support foot; never the mid-ankle point while a leg is in the air), else
+            # at the robot's standing feet, else (flight) at the waist moving like the person's.
+            # A foot the person stands on that the robot is still putting down counts at its
+            # landing spot (rooting at the robot's other foot would place the body from the
+            # person's foot in the air).
+            on = self.stepper.contacts
+            support = self.detector.feet
+            soles = {s: state.frame_placement(self.feet.sole_ids[s]) for s in on}
+            for s in SIDES:
+                spot = self.stepper.landing_spot(s)
+                if spot is not None and support.get(s, True):
+                    soles[s] = spot
+            use = [s for s in soles if support.get(s, True)] or list(on)
+            root = "flight" if not use else "double" if len(use) == 2 else use[0]
+            anchors = {s: self.feet.ankle_of(s, soles[s]) for s in use}
+            if root == "flight" and self._root != "flight" and self._last_waist is not None:
+                self._flight_root = self._last_waist
+        elif self.sequencer is not None:
             on = self.sequencer.contacts
             root = "double" if len(on) == 2 else on[0]
             anchors = {
@@ -508,9 +559,9 @@ class Retargeter:
             root = "double"
             anchors = {s: cal.robot_points[f"{s}_ankle"] for s in SIDES
                        if f"{s}_ankle" in cal.robot_points}  # fmt: skip
-        scaled = self.scaler.scale(human, support=root, anchors=anchors)
+        scaled = self._scale_from(human, root, anchors)
         if self._root is not None and root != self._root and self.spec.blend_time > 0:
-            old = self.scaler.scale(human, support=self._root, anchors=self._last_anchors)
+            old = self._scale_from(human, self._root, self._last_anchors)
             delta = old["waist"] - scaled["waist"]
             previous = self._blend_offset(t)
             if previous is not None:
@@ -528,7 +579,177 @@ class Retargeter:
             scaled, _ = limit_leg_extension(
                 scaled, anchors, self.leg_lengths, self.spec.leg_extension
             )
+        self._last_waist = (scaled["waist"].copy(), np.asarray(human["waist"], float).copy())
         return scaled, anchors
+
+    def _scale_from(
+        self, human: Mapping[str, np.ndarray], root: str, anchors: Mapping[str, np.ndarray]
+    ) -> dict[str, np.ndarray]:
+        """Scale one sample from ``root`` (``double``/``left``/``right`` or ``flight``).
+
+        In flight the waist moves from where it left the ground like the person's, scaled by the
+        calibration's root scale, and the rest follows by Poubel 2014 eq. 1 from it.
+        """
+        cal = self.calibration
+        if root == "flight" and self._flight_root is not None:
+            w_r, w_h = self._flight_root
+            waist = w_r + cal.root_scale * (cal.rotation @ (human["waist"] - w_h))
+            if np.all(np.isfinite(waist)):
+                return self.scaler.scale_rooted(human, "waist", waist)
+        scaled = self.scaler.scale(human, support=root, anchors=anchors)
+        if self.stepper is not None and root in SIDES and self.scaler.method == "poubel":
+            # Kinematic single support: the pelvis height is the person's, scaled by the leg
+            # ratio (the chain from the support foot places it horizontally); the standing foot
+            # stays. (Double support keeps Poubel's mid-ankle to mid-hip loop.)
+            z = cal.robot_waist[2] + self._leg_scale * (human["waist"][2] - cal.human_waist[2])
+            dz = z - scaled["waist"][2]
+            if math.isfinite(dz):
+                fixed = anchors_points(anchors)
+                up = np.array([0.0, 0.0, dz])
+                scaled = {k: (v if k in fixed else v + up) for k, v in scaled.items()}
+        return scaled
+
+    def _foot_yaw(self, side: str, kp: Mapping[str, np.ndarray]) -> tuple[float | None, bool]:
+        """The person's foot yaw (ankle -> toe) and whether the foot is flat.
+
+        A foot pointing down (its ankle-toe vector's horizontal part under 80 % of the
+        calibration length: toe-off, a kick) has no reliable yaw: the last reliable one is kept.
+        Flat means over 90 % (a pivot is only detected on a flat foot).
+        """
+        toe, ankle = kp.get(f"{side}_toe"), kp.get(f"{side}_ankle")
+        length = self.calibration.human_lengths.get(f"{side}_toe")
+        if toe is None or ankle is None or not length:
+            return None, False
+        d = toe - ankle
+        ratio = math.hypot(d[0], d[1]) / length
+        if not math.isfinite(ratio):
+            return self._last_foot_yaw.get(side), False
+        if ratio >= 0.8:
+            self._last_foot_yaw[side] = yaw_of(d)
+        return self._last_foot_yaw.get(side), ratio >= 0.9
+
+    def _reachable(
+        self, side: str, sole: np.ndarray, R: np.ndarray, hip: np.ndarray | None
+    ) -> np.ndarray:
+        r"""A swing sole position moved towards the scaled hip until the leg reaches it.
+
+        Beyond the leg length the ankle is pulled along the hip-ankle line to ``leg_extension``
+        of it; else, with :math:`h` the hip, :math:`a` the ankle and :math:`\rho L` the
+        ``leg_extension`` share of the leg length, :math:`\lVert a_{xy} - h_{xy} \rVert \le
+        \sqrt{(\rho L)^2 - (h_z - a_z)^2}` (an unreachable target stretches the leg and drags
+        the foot along the ground instead of lifting it).
+        """
+        L = self.leg_lengths.get(side)
+        if L is None or hip is None or not np.all(np.isfinite(hip)):
+            return sole
+        ankle = sole - R @ self.feet.ankle_to_sole[side]
+        if np.linalg.norm(ankle - hip) > L:
+            # Too high or too far for the scaled hip: along the hip-ankle line, at full reach.
+            d3 = ankle - hip
+            ankle = hip + d3 * (self.spec.leg_extension * L / float(np.linalg.norm(d3)))
+            return ankle + R @ self.feet.ankle_to_sole[side]
+        reach2 = (self.spec.leg_extension * L) ** 2 - (hip[2] - ankle[2]) ** 2
+        d = ankle[:2] - hip[:2]
+        n = float(np.hypot(d[0], d[1]))
+        r = math.sqrt(max(reach2, 0.0))
+        if n <= r:
+            return sole
+        out = sole.copy()
+        out[:2] = sole[:2] - d * (1.0 - r / n)
+        return out
+
+    def _stride(self, side: str, stance: pin.SE3, human: np.ndarray) -> np.ndarray:
+        r"""Robot ankle-to-ankle vector of a step from the person's, ``human`` (swing - stance).
+
+        Scaled by the leg-length ratio :math:`s` and turned by the calibration heading; in the
+        stance sole's heading frame the forward part is kept, the lateral part is the robot's
+        reference stance width plus :math:`s` times the person's change of lateral distance
+        since calibration, at least 70 % of the reference width (feet never cross).
+        """
+        cal = self.calibration
+        d = self._leg_scale * (cal.rotation @ human)
+        psi = yaw_of(stance.rotation[:, 0])
+        c, s_ = math.cos(psi), math.sin(psi)
+        fwd, lat = c * d[0] + s_ * d[1], -s_ * d[0] + c * d[1]
+        sign = 1.0 if side == "left" else -1.0
+        lat = sign * max(0.7 * self._width_r, self._width_r + sign * lat - self._width_h)
+        return np.array([c * fwd - s_ * lat, s_ * fwd + c * lat, d[2]])
+
+    def _step(
+        self,
+        t: float,
+        scaled: Mapping[str, np.ndarray],
+        kp: Mapping[str, np.ndarray],
+        rots: Mapping[str, np.ndarray],
+    ) -> StepCommand:
+        """One tick of the kinematic stepper: contacts switched, anchors moved, sole targets."""
+        ctrl, feet, cal = self.controller, self.feet, self.calibration
+        soles = {s: ctrl.state.frame_placement(feet.sole_ids[s]).copy() for s in SIDES}
+
+        def waist_dyaw() -> float:
+            return waist_yaw(kp, rots) - self._waist_yaw_cal
+
+        desired = {s: feet.swing_sole(s, scaled, kp, cal, soles[s], waist_dyaw) for s in SIDES}
+        human_foot: dict[str, tuple[float, np.ndarray] | None] = {}
+        for s in SIDES:
+            yaw, flat = self._foot_yaw(s, kp)
+            a_s = scaled.get(f"{s}_ankle")
+            ok = yaw is not None and flat and a_s is not None and np.all(np.isfinite(a_s))
+            human_foot[s] = (yaw, a_s) if ok else None
+            if yaw is not None and s in cal.human_foot_yaw:
+                # The sole's yaw follows the person's foot (kept while the foot points down).
+                R = rot_z(yaw - cal.human_foot_yaw[s]) @ feet.sole_ref[s].rotation
+                desired[s] = pin.SE3(R, desired[s].translation)
+        if not self.stepper.started:
+            self.stepper.reset(t, soles, human_foot)
+            self._human_anchor = {
+                side: np.array(kp[f"{side}_ankle"], float)
+                for side in SIDES
+                if f"{side}_ankle" in kp and np.all(np.isfinite(kp[f"{side}_ankle"]))
+            }
+            # Lateral distances of the feet at the start: the robot's, the scaled person's.
+            psi = yaw_of(soles["left"].rotation[:, 0])
+            lateral = np.array([-math.sin(psi), math.cos(psi), 0.0])
+            self._width_r = float(
+                lateral @ (soles["left"].translation - soles["right"].translation)
+            )
+            self._width_h = 0.0
+            if len(self._human_anchor) == 2:
+                d = cal.rotation @ (self._human_anchor["left"] - self._human_anchor["right"])
+                self._width_h = self._leg_scale * float(lateral @ d)
+        # The swing sole's height is the person's foot height (the lowest of its key-points
+        # above their ground, from the detector) times the leg-length ratio; beside a standing
+        # foot, its horizontal place is the person's foot-to-foot vector times that ratio (the
+        # stride of the scaled person, not of the robot's leg proportions).
+        on = self.stepper.contacts
+        for side, d in desired.items():
+            p = d.translation.copy()
+            other = "right" if side == "left" else "left"
+            a, b = kp.get(f"{side}_ankle"), self._human_anchor.get(other)
+            if on == (other,) and a is not None and b is not None:
+                stance = feet.ankle_of(other, soles[other])
+                ankle = stance + self._stride(side, soles[other], a - b)
+                if np.all(np.isfinite(ankle)):
+                    p[:2] = (ankle + d.rotation @ feet.ankle_to_sole[side])[:2]
+            h = self.detector.height.get(side)
+            if h is not None and math.isfinite(h):
+                p[2] = self.stepper.ground + self._leg_scale * h
+            p = self._reachable(side, p, d.rotation, scaled.get(f"{side}_hip"))
+            desired[side] = pin.SE3(d.rotation, p)
+        before = dict(self.stepper.states)
+        cmd = self.stepper.update(t, self.detector.feet, soles, desired, human_foot)
+        for side in SIDES:
+            # Where the person's foot touched down: the reference of the next stride (the
+            # person's ankle rolls forward over the toes during stance, a flat robot sole not).
+            if before[side] == "swing" and cmd.states[side] != "swing":
+                ankle = kp.get(f"{side}_ankle")
+                if ankle is not None and np.all(np.isfinite(ankle)):
+                    self._human_anchor[side] = np.array(ankle, float)
+        if cmd.switched:
+            ctrl.set_contacts([self.support.feet[s].contact for s in cmd.contacts])
+        for side, anchor in cmd.anchors.items():
+            self.contacts.set_anchor(self.support.feet[side].contact, anchor)
+        return cmd
 
     def _ramp(self, t: float) -> float:
         """Start ramp weight: minimum-jerk from 0 to 1 over ``calibration.ramp_time``."""
@@ -596,7 +817,14 @@ class Retargeter:
             "config_name": ctrl.config.get("name", ""),
             "root_nq": ctrl.robot.root_nq,
             "messages": rec.rows["messages"][:50],
-            "support_log": [] if self.sequencer is None else self.sequencer.log,
+            "support_log": (
+                self.sequencer.log
+                if self.sequencer is not None
+                else self.stepper.log
+                if self.stepper is not None
+                else []
+            ),
+            "balance_mode": None if self.support is None else self.support.mode,
         }
         return rec.trajectory(human, meta)
 

@@ -14,11 +14,14 @@ from typing import Any
 
 import numpy as np
 
+from ..constraints.contacts import Contacts
 from ..control.controller import Controller
 from ..errors import ConfigError, QPRetargetError, close_matches_hint
 from ..motion.keypoints import KEYPOINT_NAMES, KeypointMapError, load_keypoint_map
 from ..motion.phases import SIDES, PhaseThresholds, SequencerSettings
 from ..motion.scaling import SCALING_METHODS
+from ..tasks.com import ComTask
+from .stepping import StepSettings
 
 #: Keys of the ``retarget:`` section.
 RETARGET_KEYS = (
@@ -96,14 +99,30 @@ class FootBinding:
     task: str
 
 
+#: Balance modes of ``retarget.support.mode`` (docs/retargeting.md, "Balance modes").
+SUPPORT_MODES = ("kinematic", "static")
+
+
 @dataclass(frozen=True)
 class SupportSpec:
-    """The ``retarget.support`` section."""
+    """The ``retarget.support`` section.
+
+    Attributes:
+        feet: side -> contact and foot task.
+        com_task: The CoM task (``static`` mode; ``None`` in ``kinematic`` mode without one).
+        detection: Support-phase thresholds on the person.
+        sequence: Poubel 2014 Table I sequence settings (``static`` mode).
+        mode: ``kinematic`` (contacts follow the person's feet, the base follows the person's
+            root) or ``static`` (Poubel 2014 Table I: CoM over the support foot first).
+        stepping: Kinematic stepping settings.
+    """
 
     feet: dict[str, FootBinding]
-    com_task: str
+    com_task: str | None
     detection: PhaseThresholds
     sequence: SequencerSettings
+    mode: str = "kinematic"
+    stepping: StepSettings = field(default_factory=StepSettings)
 
 
 @dataclass(frozen=True)
@@ -303,9 +322,16 @@ def _is_numbers(x: Any) -> bool:
 
 
 def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
-    raw = {} if raw is True else _mapping(raw, path, "{feet, com_task, detection, sequence}")
-    _check_keys(raw, ("feet", "com_task", "detection", "sequence"), path)
-    contacts = next((c for c in controller.constraints if hasattr(c, "set_contacts")), None)
+    raw = {} if raw is True else _mapping(raw, path, "{mode, feet, com_task, detection, ...}")
+    _check_keys(raw, ("mode", "feet", "com_task", "detection", "sequence", "stepping"), path)
+    mode = raw.get("mode", "kinematic")
+    if mode not in SUPPORT_MODES:
+        raise ConfigError(
+            f"unknown balance mode {mode!r}; one of {', '.join(SUPPORT_MODES)} "
+            "(docs/retargeting.md, 'Balance modes').",
+            path=f"{path}.mode",
+        )
+    contacts = next((c for c in controller.constraints if isinstance(c, Contacts)), None)
     if contacts is None:
         raise ConfigError(
             "support phases switch foot contacts, but the controller has no `contacts` "
@@ -373,15 +399,17 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
         feet[side] = FootBinding(contact, task)
     com_task = raw.get("com_task")
     if com_task is None:
-        coms = [n for n, t in controller.tasks.items() if type(t).__name__ == "ComTask"]
-        if len(coms) != 1:
+        coms = [n for n, t in controller.tasks.items() if isinstance(t, ComTask)]
+        if len(coms) != 1 and mode == "kinematic":
+            coms = [None]
+        elif len(coms) != 1:
             raise ConfigError(
                 f"support sequences move the CoM: add one `- {{type: com, axes: xy}}` task "
                 f"(found {coms}) or name it with `com_task:`.",
                 path=path,
             )
         com_task = coms[0]
-    if com_task not in controller.tasks or not hasattr(controller.tasks[com_task], "axes"):
+    if com_task is not None and not isinstance(controller.tasks.get(com_task), ComTask):
         raise ConfigError(
             f"{com_task!r} is not a CoM task of the controller.", path=f"{path}.com_task"
         )
@@ -401,7 +429,16 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
         )
     except ValueError as exc:
         raise ConfigError(str(exc), path=f"{path}.sequence") from None
-    return SupportSpec(feet=feet, com_task=com_task, detection=detection, sequence=sequence)
+    step = _mapping(raw.get("stepping"), f"{path}.stepping", "stepping settings")
+    _check_keys(step, [f.name for f in fields(StepSettings)], f"{path}.stepping")
+    try:
+        stepping = StepSettings(**{k: _number(v, f"{path}.stepping.{k}") for k, v in step.items()})
+    except ValueError as exc:
+        raise ConfigError(str(exc), path=f"{path}.stepping") from None
+    return SupportSpec(
+        feet=feet, com_task=com_task, detection=detection, sequence=sequence, mode=mode,
+        stepping=stepping,
+    )  # fmt: skip
 
 
 def _same_body(robot: Any, frame_a: int, frame_b: int) -> bool:

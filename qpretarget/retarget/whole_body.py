@@ -14,14 +14,15 @@ from ..motion.phases import SIDES
 def whole_body_config(
     robot: str = "g1", *, base: Mapping[str, Any] | None = None
 ) -> dict[str, Any]:
-    """A whole-body retargeting controller with support sequences for a bundled robot.
+    """A whole-body retargeting controller with the static support sequences, for a bundled robot.
 
     Without ``base`` it is built from the robot's registry entry (an installed package ships no
     configs): pelvis pose, torso orientation, hands, elbows and head (gain 30 /s); joint,
     velocity and acceleration limits, contacts and support polygon. With ``base`` (e.g.
     ``configs/g1_whole_body.yaml``) that config is kept and only what the support sequences of
     Poubel 2014 Table I need is added when missing: a CoM task (x, y), a pose task on each sole,
-    and the ``retarget:`` section (its ``support:`` included). In both cases the knees are kept
+    and the ``retarget:`` section (its ``support:`` included, ``mode: static``: the CoM moves over
+    the support foot before a foot lifts). In both cases the knees are kept
     0.2 rad from straight (the straight-knee singularity stalls a velocity-level controller
     holding a foot on the ground), and the damping is at least 0.3: with 1e-3 and full-error
     gains the closed loop is ill-conditioned near G1's wrist and knee singularities (without
@@ -114,7 +115,10 @@ def whole_body_config(
                 {"type": "contacts"},
                 {"type": "support_polygon", "margin": 0.01},
             ],
-            "retarget": {"tasks": dict(bindings), "support": {"feet": feet, "com_task": "com"}},
+            "retarget": {
+                "tasks": dict(bindings),
+                "support": {"mode": "static", "feet": feet, "com_task": "com"},
+            },
         }
     # Extend a given config.
     cfg = copy.deepcopy(dict(base))
@@ -155,6 +159,7 @@ def whole_body_config(
     retarget = dict(cfg.get("retarget") or {})
     retarget.setdefault("tasks", {k: v for k, v in bindings.items() if k in names})
     support = dict(retarget.get("support") or {})
+    support["mode"] = "static"
     support.setdefault("feet", feet)
     support.setdefault("com_task", com_task)
     retarget["support"] = support

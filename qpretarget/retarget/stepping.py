@@ -1,0 +1,339 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Kinematic stepping: each robot foot's contact switched from the person's support phases.
+
+The *kinematic* balance mode (``retarget.support.mode: kinematic``, the default) makes the robot
+do what the person does with its feet: every foot is a small state machine,
+
+==========  ==================================================================================
+stance      6-D contact on, the sole pinned where it landed; it *pivots* in place (the anchor's
+            yaw ramped towards the person's foot yaw) when the person's foot turns by more than
+            ``pivot_yaw`` while staying within ``pivot_radius`` of where it landed
+swing       contact off; the sole follows the scaled human ankle (position) and the person's foot
+            yaw, kept flat and at least ``clearance`` above the ground
+landing     the person's foot is down again: the sole goes down flat, at most ``land_speed``,
+            to the ground under where it was; the contact is engaged when the sole is within
+            ``land_height`` of the ground (``land_timeout`` after, within 5 ``land_height``)
+==========  ==================================================================================
+
+A stance foot is released when the person lifts that foot, provided the other robot foot stands
+(else it waits for it to land: the robot never drops both feet because of a detection lag) or the
+person is in flight (both feet up: jumps, running), which releases both. Touch-down keeps q and v
+continuous: the sole arrives with the speed of the capped descent and the contact is anchored
+where it is (flattened onto the ground by the contact's drift correction, by at most
+``land_height``).
+
+The static balance mode (Poubel 2014 Table I, :class:`~qpretarget.motion.phases.SupportSequencer`)
+moves the CoM over the support foot before a foot lifts instead; see ``docs/retargeting.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from ..motion.phases import SIDES, min_jerk
+
+_OTHER = {"left": "right", "right": "left"}
+
+#: Foot states.
+FOOT_STATES = ("stance", "swing", "landing")
+
+
+def _positive(value: float, name: str) -> float:
+    x = float(value)
+    if not (math.isfinite(x) and x > 0):
+        raise ValueError(f"{name} must be a positive number, got {value!r}")
+    return x
+
+
+@dataclass(frozen=True)
+class StepSettings:
+    """Parameters of :class:`KinematicStepper` (YAML ``retarget.support.stepping``).
+
+    Attributes:
+        clearance: Lowest height of a swinging sole [m] (a sole scraping the ground is held
+            back by the ``ground`` constraint).
+        land_height: A landing sole is in contact this close to the ground [m].
+        land_speed: Largest descent speed of a landing sole [m/s].
+        land_reach: A landing sole goes down once this close (horizontally) to its spot [m].
+        land_timeout: After this long landing, a sole within 5 ``land_height`` is put down [s].
+        min_stance: Shortest stance before a foot may lift again [s] (no flicker).
+        lift_time: The swing target blends from the lift-off pose over this time [s].
+        pivot_yaw: Turn of the person's stance foot that starts a pivot [rad] (15 deg).
+        pivot_radius: Largest motion of the person's foot (scaled) during a pivot [m].
+        pivot_rate: Largest yaw rate of a pivoting anchor [rad/s].
+    """
+
+    clearance: float = 0.02
+    land_height: float = 0.002
+    land_speed: float = 0.5
+    land_reach: float = 0.02
+    land_timeout: float = 0.3
+    min_stance: float = 0.05
+    lift_time: float = 0.1
+    pivot_yaw: float = math.radians(15.0)
+    pivot_radius: float = 0.03
+    pivot_rate: float = math.radians(360.0)
+
+    def __post_init__(self) -> None:
+        """Validate.
+
+        Raises:
+            ValueError: A value is not positive.
+        """
+        for name in self.__dataclass_fields__:
+            _positive(getattr(self, name), name)
+
+
+@dataclass
+class StepCommand:
+    """What the stepper asks of the controller for one tick.
+
+    Attributes:
+        contacts: Sides in contact from this tick on.
+        switched: ``True`` when ``contacts`` changed at this tick.
+        feet: side -> sole target (``pinocchio.SE3``): the anchor of a standing foot.
+        anchors: side -> new contact anchor (landing flattened, pivots) to set this tick.
+        states: side -> foot state (``stance``/``swing``/``landing``).
+    """
+
+    contacts: tuple[str, ...]
+    switched: bool
+    feet: dict[str, pin.SE3] = field(default_factory=dict)
+    anchors: dict[str, pin.SE3] = field(default_factory=dict)
+    states: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        """``left-state/right-state``, as recorded in the run's ``support_state``."""
+        return "/".join(self.states[s] for s in SIDES)
+
+
+def _yaw_of(R: np.ndarray) -> float:
+    return math.atan2(R[1, 0], R[0, 0])
+
+
+def _flat(yaw: float, p: np.ndarray) -> pin.SE3:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return pin.SE3(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.asarray(p, float))
+
+
+def _blend(a: pin.SE3, b: pin.SE3, w: float) -> pin.SE3:
+    """Pose ``w`` of the way from ``a`` to ``b`` (straight line, geodesic rotation)."""
+    R = a.rotation @ pin.exp3(w * pin.log3(a.rotation.T @ b.rotation))
+    return pin.SE3(R, a.translation + w * (b.translation - a.translation))
+
+
+def _wrap(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+class KinematicStepper:
+    """Per-foot contact switching from the person's support phases (see the module docstring).
+
+    Args:
+        settings: :class:`StepSettings`.
+        dt: Control period [s].
+    """
+
+    def __init__(self, settings: StepSettings | None = None, *, dt: float = 0.01) -> None:
+        self.settings = settings if settings is not None else StepSettings()
+        self.dt = float(dt)
+        self.states: dict[str, str] = {s: "stance" for s in SIDES}
+        self.ground = 0.0
+        self.log: list[tuple[float, str]] = []
+        self._since: dict[str, float] = {s: 0.0 for s in SIDES}
+        self._landing: dict[str, pin.SE3] = {}
+        self._target: dict[str, pin.SE3] = {}
+        self._pivot: dict[str, tuple[float, np.ndarray, float, bool]] = {}
+        self._anchor: dict[str, pin.SE3] = {}
+        self._lift: dict[str, tuple[float, pin.SE3]] = {}
+        self._started = False
+
+    def __repr__(self) -> str:
+        """Foot states."""
+        return f"KinematicStepper({self.states})"
+
+    @property
+    def started(self) -> bool:
+        """Whether :meth:`reset` ran (the first :meth:`update` calls it)."""
+        return self._started
+
+    @property
+    def contacts(self) -> tuple[str, ...]:
+        """Sides in stance."""
+        return tuple(s for s in SIDES if self.states[s] == "stance")
+
+    def reset(
+        self,
+        t: float,
+        soles: Mapping[str, pin.SE3],
+        human_foot: Mapping[str, tuple[float, np.ndarray] | None] | None = None,
+    ) -> None:
+        """Start with both feet in stance where they are (the robot starts standing)."""
+        self.ground = float(np.mean([soles[s].translation[2] for s in SIDES]))
+        self.states = {s: "stance" for s in SIDES}
+        self._since = {s: t for s in SIDES}
+        self._anchor = {s: soles[s].copy() for s in SIDES}
+        self._landing, self._target, self._pivot, self._lift = {}, {}, {}, {}
+        for side, foot in (human_foot or {}).items():
+            if foot is not None:
+                yaw0 = _yaw_of(soles[side].rotation)
+                self._pivot[side] = (foot[0], np.array(foot[1][:2]), yaw0, False)
+        self.log = [(t, "stance/stance")]
+        self._started = True
+
+    # ------------------------------------------------------------------------------ the tick
+    def update(
+        self,
+        t: float,
+        human_support: Mapping[str, bool],
+        soles: Mapping[str, pin.SE3],
+        desired: Mapping[str, pin.SE3],
+        human_foot: Mapping[str, tuple[float, np.ndarray] | None],
+    ) -> StepCommand:
+        """Advance every foot by one tick.
+
+        Args:
+            t: Time [s].
+            human_support: side -> the person's foot is in support (detector, with hysteresis).
+            soles: side -> current sole pose of the robot.
+            desired: side -> sole pose from the scaled person (scaled ankle, foot yaw, flat).
+            human_foot: side -> ``(yaw [rad], scaled ankle position (3,))`` of the person's foot,
+                or ``None`` when unknown (no pivots then).
+
+        Returns:
+            The :class:`StepCommand` of this tick.
+        """
+        if not self._started:
+            self.reset(t, soles, human_foot)
+        st = self.settings
+        before = self.contacts
+        flight = not any(human_support.get(s, True) for s in SIDES)
+        anchors: dict[str, pin.SE3] = {}
+        for side in SIDES:
+            state = self.states[side]
+            up = not human_support.get(side, True)
+            if state == "stance":
+                other_stands = self.states[_OTHER[side]] == "stance"
+                if up and (other_stands or flight) and t - self._since[side] >= st.min_stance:
+                    self._enter(t, side, "swing")
+                    self._lift[side] = (t, soles[side].copy())
+                    self._pivot.pop(side, None)
+                else:
+                    pivot = self._pivot_anchor(side, human_foot.get(side))
+                    if pivot is not None:
+                        anchors[side] = pivot
+            elif state == "swing":
+                if not up:
+                    self._enter(t, side, "landing")
+                    d = desired[side]
+                    p = np.array([d.translation[0], d.translation[1], self.ground])
+                    self._landing[side] = _flat(_yaw_of(d.rotation), p)
+            elif state == "landing":
+                if up:
+                    self._enter(t, side, "swing")
+                else:
+                    sole = soles[side]
+                    h = float(sole.translation[2]) - self.ground
+                    late = t - self._since[side] >= st.land_timeout
+                    if h <= st.land_height or (late and h <= 5.0 * st.land_height):
+                        self._enter(t, side, "stance")
+                        anchor = _flat(
+                            _yaw_of(sole.rotation),
+                            np.array([sole.translation[0], sole.translation[1], self.ground]),
+                        )
+                        self._anchor[side] = anchor
+                        anchors[side] = anchor
+                        foot = human_foot.get(side)
+                        if foot is not None:
+                            yaw0 = _yaw_of(anchor.rotation)
+                            self._pivot[side] = (foot[0], np.array(foot[1][:2]), yaw0, False)
+        feet: dict[str, pin.SE3] = {}
+        for side in SIDES:
+            state = self.states[side]
+            if state == "swing":
+                d = desired[side]
+                z = max(float(d.translation[2]), self.ground + st.clearance)
+                target = _flat(_yaw_of(d.rotation), np.array([*d.translation[:2], z]))
+                start = self._lift.get(side)
+                if start is not None:
+                    # Blend from where the sole left the ground (no step in the target).
+                    w = min_jerk((t - start[0]) / st.lift_time)
+                    if w >= 1.0:
+                        self._lift.pop(side)
+                    else:
+                        target = _blend(start[1], target, w)
+                feet[side] = target
+                self._target[side] = target
+            elif state == "landing":
+                # Down only once above the landing spot (a sole put down short of it would carry
+                # the lag of the swing into every later stance), at most `land_speed`.
+                land = self._landing[side]
+                prev = self._target.get(side, soles[side])
+                z_prev = float(prev.translation[2])
+                miss = float(np.linalg.norm(soles[side].translation[:2] - land.translation[:2]))
+                late = t - self._since[side] >= st.land_timeout
+                step = st.land_speed * self.dt if miss <= st.land_reach or late else 0.0
+                z = max(self.ground, z_prev - step)
+                target = pin.SE3(land.rotation.copy(), np.array([*land.translation[:2], z]))
+                feet[side] = target
+                self._target[side] = target
+            else:
+                self._target.pop(side, None)
+                feet[side] = self._anchor[side].copy()
+        contacts = self.contacts
+        return StepCommand(
+            contacts=contacts,
+            switched=contacts != before,
+            feet=feet,
+            anchors=anchors,
+            states=dict(self.states),
+        )
+
+    def landing_spot(self, side: str) -> pin.SE3 | None:
+        """Sole pose a landing foot is going down to (``None`` unless ``side`` is landing)."""
+        if self.states[side] != "landing":
+            return None
+        return self._landing[side].copy()
+
+    def _enter(self, t: float, side: str, state: str) -> None:
+        self.states[side] = state
+        self._since[side] = t
+        self.log.append((t, "/".join(self.states[s] for s in SIDES)))
+
+    def _pivot_anchor(self, side: str, foot: tuple[float, np.ndarray] | None) -> pin.SE3 | None:
+        """The ramped anchor of a stance foot that pivots, or ``None``.
+
+        The anchor's yaw follows the person's foot turn since touch-down (rate-limited) once
+        that turn exceeds ``pivot_yaw`` with the foot within ``pivot_radius`` of where it landed.
+        """
+        start = self._pivot.get(side)
+        if start is None or foot is None:
+            return None
+        yaw0, xy0, anchor_yaw0, active = start
+        st = self.settings
+        yaw, ankle = foot
+        turn = _wrap(yaw - yaw0)
+        if float(np.linalg.norm(np.asarray(ankle[:2]) - xy0)) > st.pivot_radius:
+            return None
+        if not active:
+            if abs(turn) < st.pivot_yaw:
+                return None
+            self._pivot[side] = (yaw0, xy0, anchor_yaw0, True)
+        anchor = self._anchor[side]
+        base = _yaw_of(anchor.rotation)
+        limit = st.pivot_rate * self.dt
+        step = max(-limit, min(limit, _wrap(anchor_yaw0 + turn - base)))
+        if abs(step) < 1e-9:
+            return None
+        new = _flat(base + step, anchor.translation.copy())
+        self._anchor[side] = new
+        return new
+
+
+__all__ = ["FOOT_STATES", "KinematicStepper", "StepCommand", "StepSettings"]
