@@ -20,17 +20,19 @@ import numpy as np
 
 
 def _config(path: Path, ramp: float | None, tmp: Path) -> Path:
+    """``path`` itself, or a copy whose ``retarget.calibration.ramp_time`` is ``ramp``."""
     if ramp is None:
         return path
-    out = []
-    for line in path.read_text(encoding="utf-8").splitlines(keepends=True):
-        if line.startswith("  calibration:"):
-            continue
-        out.append(line)
-        if line.startswith("retarget:"):
-            out.append(f"  calibration: {{frames: 1, ramp_time: {ramp}}}\n")
+    import yaml
+
+    from qpretarget.yamlio import load_yaml
+
+    cfg = load_yaml(path.read_text(encoding="utf-8"))
+    calib = dict(cfg["retarget"].get("calibration") or {})
+    calib["ramp_time"] = ramp
+    cfg["retarget"]["calibration"] = calib
     p = tmp / f"{path.stem}_ramp{ramp}.yaml"
-    p.write_text("".join(out), encoding="utf-8")
+    p.write_text(yaml.safe_dump(cfg, sort_keys=False), encoding="utf-8")
     return p
 
 

@@ -64,6 +64,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="PD gain profile: stiff (default), unitree, beyondmimic (G1), generic",
     )
     p.add_argument("--physics-timestep", type=float, default=None, help="physics step [s]")
+    p.add_argument(
+        "--physics-feedforward",
+        choices=("gravity", "none"),
+        default="gravity",
+        help="torque feed-forward added to the PD: the static torques holding the reference "
+        "posture on its stance feet (default), or none",
+    )
     p.add_argument("--no-assist", action="store_true", help="skip the assisted replay")
     p.set_defaults(func=run)
 
@@ -155,6 +162,7 @@ def _physics(traj: object, args: argparse.Namespace, out: Path, metrics: dict) -
         timestep=args.physics_timestep,
         assisted=not args.no_assist,
         progress=sys.stderr.isatty(),
+        feedforward=args.physics_feedforward,
     )
     if not args.no_per_frame:
         from ..physics.metrics import per_frame_series

@@ -8,10 +8,12 @@ frames.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import overload
+from collections.abc import Mapping, Sequence
+from typing import Any, overload
 
 import numpy as np
+
+from .human_motion import HumanMotion
 
 # Up-axis conversion: a y-up world is mapped to our z-up world by the cyclic permutation
 # (x, y, z) -> (z, x, y), i.e. new_x = old_z, new_y = old_x, new_z = old_y.  It is a proper
@@ -164,3 +166,45 @@ def change_up_axis(
     if orientations is not None:
         orientations = A @ orientations @ A.T
     return positions, orientations, A
+
+
+def skeleton_motion(
+    names: Sequence[str],
+    parents: Sequence[int],
+    translations: Sequence[np.ndarray],
+    rotations: Sequence[np.ndarray | None],
+    *,
+    num_frames: int,
+    rate: float,
+    up_axis: str,
+    source: str,
+    meta: Mapping[str, Any],
+) -> HumanMotion:
+    """A skeleton reader's clip: :func:`forward_kinematics`, then :func:`change_up_axis`.
+
+    Args:
+        names: joint names, parents before children.
+        parents: parent index of each joint (-1 for a root).
+        translations: per joint, its offset in its parent, as for :func:`forward_kinematics`.
+        rotations: per joint, its local rotation stack or ``None``.
+        num_frames: ``T``; the samples are at ``t = k / rate``.
+        rate: frame rate [Hz].
+        up_axis: up axis of the file (``"y"`` or ``"z"``).
+        source: the file, stored in the motion.
+        meta: the reader's metadata.
+
+    Returns:
+        The motion in metres, z up, with world orientations.
+    """
+    positions, orientations = forward_kinematics(parents, translations, rotations, num_frames)
+    positions, orientations, _ = change_up_axis(positions, orientations, up_axis)
+    return HumanMotion(
+        t=np.arange(num_frames) / rate,
+        names=tuple(names),
+        positions=positions,
+        parents=tuple(parents),
+        orientations=orientations,
+        rate=rate,
+        source=source,
+        meta=dict(meta),
+    )

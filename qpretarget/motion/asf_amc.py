@@ -28,7 +28,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ._kinematics import change_up_axis, euler_product, forward_kinematics
+from ._kinematics import euler_product, skeleton_motion
 from .human_motion import HumanMotion, MotionFormatError
 
 _ROTATION_DOFS = {"rx": "x", "ry": "y", "rz": "z"}
@@ -570,15 +570,14 @@ def read_asf_amc(
     names, parents, translations, rotations = _joint_motions(
         skeleton, values, scale, to_rad, asf_to_rad
     )
-    positions, orientations = forward_kinematics(parents, translations, rotations, num_frames)
-    positions, orientations, _ = change_up_axis(positions, orientations, up_axis)
-    return HumanMotion(
-        t=np.arange(num_frames) / rate,
-        names=tuple(names),
-        positions=positions,
-        parents=tuple(parents),
-        orientations=orientations,
+    return skeleton_motion(
+        names,
+        parents,
+        translations,
+        rotations,
+        num_frames=num_frames,
         rate=rate,
+        up_axis=up_axis,
         source=str(amc_path),
         meta={
             "format": "asf/amc",

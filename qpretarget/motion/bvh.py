@@ -23,7 +23,7 @@ from typing import Literal, NoReturn
 
 import numpy as np
 
-from ._kinematics import change_up_axis, euler_product, forward_kinematics
+from ._kinematics import euler_product, forward_kinematics, skeleton_motion
 from .human_motion import HumanMotion, MotionFormatError
 
 #: File units tried by ``length_scale="auto"``: name -> metres per file unit.
@@ -418,17 +418,14 @@ def read_bvh(
     extent = float(np.ptp(rest_positions[0], axis=0).max())
     scale, unit = _length_scale(length_scale, extent)
     translations, rotations = _joint_motions(joints, values, scale)
-    positions, orientations = forward_kinematics(parents, translations, rotations, num_frames)
-    positions, orientations, _ = change_up_axis(positions, orientations, up_axis)
-
-    rate = rate_from_frame_time(frame_time)
-    return HumanMotion(
-        t=np.arange(num_frames) / rate,
-        names=tuple(j.name for j in joints),
-        positions=positions,
-        parents=tuple(parents),
-        orientations=orientations,
-        rate=rate,
+    return skeleton_motion(
+        [j.name for j in joints],
+        parents,
+        translations,
+        rotations,
+        num_frames=num_frames,
+        rate=rate_from_frame_time(frame_time),
+        up_axis=up_axis,
         source=str(path),
         meta={
             "format": "bvh",

@@ -93,6 +93,8 @@ class PhysicsModel:
         mass: total mass [kg].
         effort_missing: joints whose URDF gives no effort limit (left unlimited).
         notes: what was changed to convert the URDF.
+        robot: the :class:`~qpretarget.robot.RobotModel` it was built from (pinocchio, for the
+            gravity feed-forward).
     """
 
     model: Any
@@ -116,6 +118,7 @@ class PhysicsModel:
     mass: float
     effort_missing: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    robot: Any = None
 
     def apply_gains(self) -> None:
         """Write ``kp``, ``kd`` and ``effort`` into the model's actuators (after changing them).
@@ -462,6 +465,7 @@ def build_physics_model(
         mass=float(np.sum(m.body_mass)),
         effort_missing=effort_missing,
         notes=notes,
+        robot=robot,
     )
     pm.apply_gains()
     return pm

@@ -37,6 +37,8 @@ import numpy as np
 from ..errors import QPRetargetError
 from .model import PhysicsModel, import_mujoco, set_configuration
 
+#: Torque feed-forwards added to eq. 1 (``--physics-feedforward``).
+FEEDFORWARDS = ("gravity", "none")
 #: Standard gravity [m/s^2] (MuJoCo's default gravity vector is (0, 0, -9.81)).
 GRAVITY = 9.81
 
@@ -179,6 +181,44 @@ def joint_columns(traj: Any, pm: PhysicsModel) -> np.ndarray:
     return np.array([names.index(j) for j in pm.joint_names], dtype=int)
 
 
+def gravity_feedforward(
+    pm: PhysicsModel, root: np.ndarray, joints: np.ndarray, stance: np.ndarray
+) -> np.ndarray:
+    """Joint torques that hold each reference posture still on its stance feet (T, n) [N m].
+
+    Static equilibrium of the floating base (pinocchio): with ``g(q)`` the generalized gravity
+    and ``J_c`` the 6-D Jacobians of the stance soles (local frames), the contact wrenches are
+    the least-norm solution of the base rows ``J_c,base' f = g_base``, and the joint torques
+    ``tau = g_joints - J_c,joints' f``. Without a stance foot: ``tau = g_joints`` (limbs held
+    against gravity relative to the base). The PD of eq. 1 then only corrects errors, so a servo
+    does not sag by ``tau / kp`` (which, at the ankles, moves the CoM toward the toes).
+    """
+    import pinocchio as pin
+
+    robot = pm.robot
+    model, data = robot.model, robot.data
+    T, n = joints.shape
+    q_idx, v_idx = robot.joint_q_index, robot.joint_v_index
+    fids = [robot.frame_id(f.frame) for f in robot.feet.values()]
+    out = np.zeros((T, n))
+    q = np.array(robot.q_reference, dtype=float)
+    for k in range(T):
+        q[:7] = root[k]
+        q[q_idx] = joints[k]
+        g = pin.computeGeneralizedGravity(model, data, q)
+        feet = [fids[i] for i in np.nonzero(stance[k])[0]] if len(fids) else []
+        if feet:
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+            J = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL) for f in feet])
+            f_c = np.linalg.lstsq(J[:, :6].T, g[:6], rcond=None)[0]
+            tau = g - J.T @ f_c
+        else:
+            tau = g
+        out[k] = tau[v_idx]
+    return out
+
+
 def _floor_height(pm: PhysicsModel, d: Any, mujoco: Any) -> float:
     """Height of the lowest point of the robot's collision geometry in ``d``'s configuration."""
     m = pm.model
@@ -204,6 +244,7 @@ def replay_run(
     fall_height: float | None = None,
     fall_tilt_deg: float | None = None,
     progress: bool = False,
+    feedforward: str = "gravity",
 ) -> ReplaySeries:
     """Replay ``traj`` (a :class:`~qpretarget.trajectory.RobotTrajectory`) on ``pm``.
 
@@ -217,6 +258,8 @@ def replay_run(
         fall_tilt_deg: fall when the torso tilts this far from the reference's [deg] (default
             :data:`~qpretarget.physics.metrics.FALL_TILT_DEG`).
         progress: show a progress bar (frames).
+        feedforward: ``gravity`` adds :func:`gravity_feedforward` to eq. 1; ``none``: PD and
+            velocity feed-forward only.
 
     Raises:
         PhysicsInputError: the run does not match the robot (before any simulation).
@@ -246,6 +289,14 @@ def replay_run(
                 ref_contacts[:, i] = contacts[:, list(traj.foot_names).index(name)]
         contacts_assumed = False
 
+    if feedforward not in FEEDFORWARDS:
+        raise PhysicsInputError(
+            f"unknown feed-forward {feedforward!r}; choose from {', '.join(FEEDFORWARDS)}."
+        )
+    if feedforward == "gravity" and pm.robot is not None:
+        tau_ff = gravity_feedforward(pm, root_ref, qj_ref, ref_contacts)
+    else:
+        tau_ff = np.zeros((T, n))
     pm.apply_gains()
     d = mujoco.MjData(m)
     dref = mujoco.MjData(m)
@@ -299,6 +350,7 @@ def replay_run(
         m.opt.timestep = dt / n_sub
         q0, q1 = qj_ref[k - 1], qj_ref[k]
         vff = vj_ref[k]
+        f0, f1 = tau_ff[k - 1], tau_ff[k]
         p0, p1 = root_ref[k - 1, :3], root_ref[k, :3]
         r0, r1 = _wxyz(root_ref[k - 1]), _wxyz(root_ref[k])
         if float(np.dot(r0, r1)) < 0.0:
@@ -310,9 +362,10 @@ def replay_run(
         for j in range(n_sub):
             a = j / n_sub
             qr = q0 + a * (q1 - q0)
-            u = kp * (qr - d.qpos[qadr]) + kd * (vff - d.qvel[dadr])  # eq. 1 before the clamp
+            tff = f0 + a * (f1 - f0)
+            u = kp * (qr - d.qpos[qadr]) + kd * (vff - d.qvel[dadr]) + tff  # eq. 1, unclamped
             sat |= np.abs(u) >= effort
-            d.ctrl[:] = qr + ratio * vff  # the position actuators apply eq. 1, clamped
+            d.ctrl[:] = qr + ratio * vff + tff / kp  # position actuators apply eq. 1, clamped
             if assisted:
                 rr = r0 + a * (r1 - r0)
                 d.mocap_pos[mocap] = p0 + a * (p1 - p0)
@@ -421,6 +474,7 @@ def check_run(
     timestep: float | None = None,
     assisted: bool = True,
     progress: bool = False,
+    feedforward: str = "gravity",
 ) -> tuple[dict[str, Any], ReplaySeries, ReplaySeries | None]:
     """Build the model, replay the run unassisted (and assisted), return the metrics.
 
@@ -432,6 +486,7 @@ def check_run(
         timestep: physics time step [s] (default 2 ms).
         assisted: also run the assisted replay.
         progress: progress bars.
+        feedforward: ``gravity`` (default) or ``none`` (see :func:`replay_run`).
 
     Returns:
         ``(metrics, unassisted series, assisted series or None)``; metrics as
@@ -450,6 +505,10 @@ def check_run(
             robot, gains=gains, timestep=timestep if timestep is not None else DEFAULT_TIMESTEP
         )
     joint_columns(traj, pm)
-    free = replay_run(traj, pm, assisted=False, progress=progress)
-    helped = replay_run(traj, pm, assisted=True, progress=progress) if assisted else None
+    free = replay_run(traj, pm, assisted=False, progress=progress, feedforward=feedforward)
+    helped = (
+        replay_run(traj, pm, assisted=True, progress=progress, feedforward=feedforward)
+        if assisted
+        else None
+    )
     return summarize(free, helped, pm), free, helped

@@ -8,27 +8,26 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-#: Static-balance config: configs/g1_whole_body_static.yaml when present, else g1_whole_body.yaml
-#: (both feet planted, CoM over the soles); the start ramp is lengthened to 2 s because the default
-#: 0.5 s ramp moves the CoM 6 cm forward and stops it within 0.25 s, which puts the ZMP past the
-#: toes (docs/physics.md).
-RAMP = "  calibration: {frames: 1, ramp_time: 2.0}\n"
+#: Static-balance config: configs/g1_whole_body_static.yaml when present, else g1_whole_body.yaml;
+#: the start ramp is lengthened to 2 s because the default 0.5 s ramp moves the CoM 6 cm forward
+#: and stops it within 0.25 s, which puts the ZMP past the toes (docs/physics.md).
+RAMP_TIME = 2.0
 
 
 def static_config(configs_dir: Path, tmp: Path) -> Path:
+    import yaml
+
+    from qpretarget.yamlio import load_yaml
+
     base = configs_dir / "g1_whole_body_static.yaml"
     if not base.is_file():
         base = configs_dir / "g1_whole_body.yaml"
-    lines = base.read_text(encoding="utf-8").splitlines(keepends=True)
-    out = []
-    for line in lines:
-        if line.startswith("  calibration:"):
-            continue
-        out.append(line)
-        if line.startswith("retarget:"):
-            out.append(RAMP)
-    path = tmp / "g1_static_slow_ramp.yaml"
-    path.write_text("".join(out), encoding="utf-8")
+    cfg = load_yaml(base.read_text(encoding="utf-8"))
+    calib = dict(cfg["retarget"].get("calibration") or {})
+    calib["ramp_time"] = RAMP_TIME
+    cfg["retarget"]["calibration"] = calib
+    path = tmp / f"{base.stem}_ramp2.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False), encoding="utf-8")
     return path
 
 
