@@ -266,15 +266,14 @@ class LiveSession:
         import gc
 
         src = self.source
-        gc.collect()
-        gc.freeze()  # the setup's objects leave the collector's generations: shorter GC pauses
         src.open()
-        if on_open is not None:
-            on_open(src)
         self.t_open = self.clock()
-        last_status = self.t_open
-        last_frame_time = self.t_open
+        last_status = last_frame_time = self.t_open
         try:
+            if on_open is not None:
+                on_open(src)
+            gc.collect()
+            gc.freeze()  # the setup's objects leave the collector's generations: shorter pauses
             while True:
                 now = self.clock()
                 if duration is not None and now - self.t_open >= duration:
