@@ -57,6 +57,13 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except OSError as exc:
+        # A file the system refused (an output under /proc, a full disk, ...): one line that
+        # names the file, not a traceback.
+        where = f" {exc.filename!r}" if exc.filename else ""
+        print(f"qpretarget {args.command}: error: cannot write or read{where}: "
+              f"{exc.strerror or exc}.", file=sys.stderr)  # fmt: skip
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

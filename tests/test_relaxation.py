@@ -141,16 +141,20 @@ def test_a_contact_that_cannot_be_kept_gives(g1) -> None:
 
 def test_relaxed_step_keeps_what_did_not_give(g1, monkeypatch) -> None:
     """On a relaxed tick, rows and bounds of the constraints that are not reported hold to the
-    solver tolerance (1e-6), and the applied velocity stays within the velocity limits (hard)."""
+    solver tolerance (1e-6), and the applied velocity stays within the velocity limits (hard).
+    The support polygon is soft: its rows gave inside the tick's QP (exact-penalty slacks), the
+    relaxation fallback was not needed."""
     ctrl = Controller(whole_body_config(g1))
+    assert ctrl.soft_in_qp
     captured = {}
-    solve = ctrl.fallback.solve
+    solve = ctrl.strategy.solve
 
-    def spy(tp, res):
+    def spy(tp):
         captured["C"], captured["l"], captured["u"] = tp.C.copy(), tp.l.copy(), tp.u.copy()
-        return solve(tp, res)
+        return solve(tp)
 
-    monkeypatch.setattr(ctrl.fallback, "solve", spy)
+    monkeypatch.setattr(ctrl.strategy, "solve", spy)
+    monkeypatch.setattr(ctrl.fallback, "solve", lambda *a: pytest.fail("fallback called"))
     ctrl.set_contacts(["left_foot"])
     res = ctrl.step()
     assert set(res.relaxed) == {"support_polygon"}

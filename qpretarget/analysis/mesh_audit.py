@@ -19,8 +19,9 @@ triangle meshes).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import coal
@@ -29,6 +30,7 @@ import pinocchio as pin
 
 from ..collision import CollisionModel, link_shapes
 from ..collision.pairs import Pair, select_pairs
+from ..errors import ConfigError
 from ..robot import RobotModel, RobotState
 
 
@@ -104,8 +106,18 @@ class SelfCollisionAudit:
 
 
 def audited_pairs(robot: RobotModel) -> list[Pair]:
-    """Every pair the audit measures (module docstring), in the URDF's body order."""
-    return select_pairs(robot, link_shapes(robot, "convex_hull"), use_srdf=False).pairs
+    """Every pair the audit measures (module docstring), in the URDF's body order.
+
+    Raises:
+        ConfigError: the robot has no collision geometry.
+    """
+    shapes = link_shapes(robot, "convex_hull")
+    if len(shapes) < 2:
+        raise ConfigError(
+            f"robot {robot.name!r} has no collision geometry to audit (bodies with collision "
+            f"geometry: {len(shapes)})."
+        )
+    return select_pairs(robot, shapes, use_srdf=False).pairs
 
 
 class _MeshChecker:
@@ -193,3 +205,91 @@ def audit_self_collision(
             )
         )
     return audit
+
+
+def has_collision_geometry(robot: RobotModel) -> bool:
+    """At least two bodies with collision geometry (something to audit)."""
+    return len(link_shapes(robot, "convex_hull")) >= 2
+
+
+def audit_lines(
+    audit: SelfCollisionAudit | Mapping[str, Any] | None, n_worst: int = 3
+) -> list[str]:
+    """The audit in words, as ``evaluate`` and the run summary print it (one definition).
+
+    First line: ``N penetrating frames of T over P pairs (meshes), min distance X mm``; then,
+    when some pair penetrates, the worst pairs with their frames and deepest penetration.
+
+    Args:
+        audit: the audit, its :meth:`SelfCollisionAudit.to_dict`, or ``None`` (no geometry).
+        n_worst: penetrating pairs listed.
+    """
+    if audit is None:
+        return ["not audited: the robot has no collision geometry"]
+    d = audit.to_dict() if isinstance(audit, SelfCollisionAudit) else audit
+    lines = [
+        f"{d['penetrating_frames']} penetrating frames of {d['frames_audited']} over "
+        f"{d['pairs_audited']} pairs (meshes), min distance {d['min_distance_mm']:.1f} mm"
+    ]
+    bad = sorted(d["penetrating_pairs"], key=lambda p: (-p["frames"], -p["deepest_mm"]))
+    for p in bad[:n_worst]:
+        lines.append(
+            f"  {p['pair'][0]} / {p['pair'][1]}: {p['frames']} frames, deepest "
+            f"{p['deepest_mm']:.1f} mm"
+        )
+    if len(bad) > n_worst:
+        lines.append(f"  (+{len(bad) - n_worst} more penetrating pairs)")
+    return lines
+
+
+def audit_run(q: np.ndarray, robot: RobotModel, *, stride: int = 1) -> SelfCollisionAudit | None:
+    """Audit a run's configurations over every pair (what ``evaluate`` and the summary call).
+
+    Args:
+        q: (T, nq) configurations of the run.
+        robot: its robot.
+        stride: every ``stride``-th frame (1: all).
+
+    Returns:
+        The audit, or ``None`` when the robot has no collision geometry.
+    """
+    if not has_collision_geometry(robot):
+        return None
+    return audit_self_collision(robot, np.asarray(q, dtype=float), stride=stride)
+
+
+def plot_audit(
+    audit: SelfCollisionAudit, t: np.ndarray, path: str | Path, n_worst: int = 6
+) -> Path:
+    """Figure: distance over time of the ``n_worst`` closest pairs, penetrations marked.
+
+    Args:
+        audit: the audit of a run.
+        t: (T,) times of the run's samples [s] (indexed by :attr:`SelfCollisionAudit.frames`).
+        path: PNG file to write.
+        n_worst: pairs drawn.
+    """
+    from .plots import _figure, _pretty, _save
+
+    fig = _figure("violations")
+    ax = fig.add_subplot(1, 1, 1)
+    tt = np.asarray(t, dtype=float)[audit.frames]
+    index = {p: i for i, p in enumerate(audit.pairs)}
+    for p in audit.worst(n_worst):
+        i = index[p.pair]
+        ax.plot(tt, audit.distance[:, i] * 1e3, lw=1.2,
+                label=f"{_pretty(p.pair[0])} / {_pretty(p.pair[1])}")  # fmt: skip
+        pen = audit.penetrating[:, i]
+        if pen.any():
+            ax.plot(tt[pen], audit.distance[pen, i] * 1e3, "x", color="red", ms=4)
+    ax.axhline(0.0, color="black", lw=0.8)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("distance [mm] (hulls; meshes where the hulls overlap)")
+    ax.set_title(
+        f"self-collision over all {len(audit.pairs)} pairs: {audit.penetrating_frames} "
+        f"penetrating frames, min {audit.min_distance_mm:.1f} mm (closest {n_worst} pairs; "
+        "x: meshes intersect)"
+    )
+    ax.legend(fontsize=8, loc="upper right")
+    ax.grid(alpha=0.3)
+    return _save(fig, Path(path))

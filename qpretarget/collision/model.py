@@ -235,8 +235,9 @@ class CollisionModel:
         #: Indices of the pairs closer than the influence distance, and their witness points
         #: (world, (k, 3)) and unit normals from a to b, after :meth:`update`.
         self.active = np.zeros(0, dtype=int)
-        self._pa = np.zeros((0, 3))
-        self._n = np.zeros((0, 3))
+        self._sel: list[Any] = []
+        self._pa: np.ndarray | None = np.zeros((0, 3))
+        self._n: np.ndarray | None = np.zeros((0, 3))
         #: Time spent in the last :meth:`update` [s] and number of exact pair distances.
         self.last_update_time = 0.0
         self.last_n_computed = 0
@@ -293,7 +294,6 @@ class CollisionModel:
         self.exact = self._flags
         act = idx
         sel: list[Any] = []
-        dl: list[float] = []
         if idx.size:
             pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
             pin.computeDistances(self.gmodel, self.gdata)
@@ -305,33 +305,54 @@ class CollisionModel:
                 keep = [x < influence for x in dl]
                 act = idx[keep]
                 sel = [r for r, c in zip(sel, keep, strict=True) if c]
-                dl = [x for x, c in zip(dl, keep, strict=True) if c]
         self.active = act
-        if act.size:
-            self._pa = np.array([r.getNearestPoint1() for r in sel])  # witness points on a
-            self._n = np.array([r.normal for r in sel])  # unit, from a to b: p_b = p_a + d n
-        else:
-            self._pa = self._n = np.zeros((0, 3))
+        # Witness points and normals are read from the results on demand (:meth:`witnesses`):
+        # each read crosses into C++, and capped rows need only the closest pairs'.
+        self._sel = sel
+        self._pa = self._n = None
         self.last_n_computed = int(idx.size)
         self.last_update_time = time.perf_counter() - t0
         return lb
 
+    def witnesses(self, sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Witness points on body a and unit normals from a to b, (k, 3) each.
+
+        Args:
+            sub: positions in :attr:`active` (default: every active pair).
+        """
+        if sub is None:
+            if self._pa is None or self._n is None:
+                self._pa, self._n = self._read(self._sel)
+            return self._pa, self._n
+        if self._pa is not None and self._n is not None:
+            return self._pa[sub], self._n[sub]
+        return self._read([self._sel[i] for i in sub.tolist()])
+
+    @staticmethod
+    def _read(results: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+        if not results:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        pa = np.array([r.getNearestPoint1() for r in results])  # witness points on a
+        n = np.array([r.normal for r in results])  # unit, from a to b: p_b = p_a + d n
+        return pa, n
+
     @property
     def witness_a(self) -> np.ndarray:
         """World witness points on body a of the :attr:`active` pairs (k, 3)."""
-        return self._pa
+        return self.witnesses()[0]
 
     @property
     def witness_b(self) -> np.ndarray:
         """World witness points on body b of the :attr:`active` pairs (k, 3)."""
-        return self._pa + self.distances[self.active, None] * self._n
+        pa, n = self.witnesses()
+        return pa + self.distances[self.active, None] * n
 
     @property
     def normals(self) -> np.ndarray:
         """Unit normals from a to b of the :attr:`active` pairs (k, 3)."""
-        return self._n
+        return self.witnesses()[1]
 
-    def gradients(self, state: RobotState) -> np.ndarray:
+    def gradients(self, state: RobotState, sub: np.ndarray | None = None) -> np.ndarray:
         r"""Rows :math:`\partial d / \partial q` (k, nv) of the last update's :attr:`active` pairs.
 
         :math:`\partial d/\partial q = n^\top (J_b(p_b) - J_a(p_a))` in the tangent space
@@ -340,10 +361,16 @@ class CollisionModel:
         coefficients :math:`c = [n;\ p_a \times n]` and the rows are
         :math:`(c^\top J^W) \circ (S_b - S_a)`, one ``(k, 6) @ (6, nv)`` product with the
         difference of the bodies' support masks.
+
+        Args:
+            state: kinematics of the tick.
+            sub: positions in :attr:`active` of the rows wanted (default: every active pair).
         """
-        if self.active.size == 0:
+        pairs = self.active if sub is None else self.active[sub]
+        if pairs.size == 0:
             return np.zeros((0, self.robot.nv))
-        return self.point_rows(state, self.active, self._pa, self._n)
+        pa, n = self.witnesses(sub)
+        return self.point_rows(state, pairs, pa, n)
 
     def point_rows(
         self, state: RobotState, pairs: np.ndarray, points: np.ndarray, normals: np.ndarray
@@ -375,9 +402,13 @@ class CollisionModel:
     def pair_levers(self, pairs: np.ndarray) -> np.ndarray:
         """(k, nv) rotation lever arms [m] of each coordinate on either body of ``pairs``.
 
-        0 for coordinates that move neither body (and for translations).
+        0 for coordinates that move neither body (and for translations), and for those that
+        move both (a common ancestor: base, waist): they move the pair rigidly, leaving its
+        distance unchanged to every order.
         """
-        return np.maximum(self._rot_lever[self._ga[pairs]], self._rot_lever[self._gb[pairs]])
+        ga, gb = self._ga[pairs], self._gb[pairs]
+        lever = np.maximum(self._rot_lever[ga], self._rot_lever[gb])
+        return lever * (1.0 - self._support[ga] * self._support[gb])
 
     def compute_all(
         self, state: RobotState

@@ -100,6 +100,17 @@ def _geometric_parent(model_parents: Sequence[int], joint: int, carriers: set[in
     return j
 
 
+def _chain_neighbours(
+    a: LinkShape, b: LinkShape, parents: Sequence[int], carriers: set[int]
+) -> bool:
+    """One body's joint is the other's geometric grandparent (two joints apart in one chain)."""
+    for x, y in ((a, b), (b, a)):
+        gp = _geometric_parent(parents, x.joint, carriers)
+        if gp != 0 and _geometric_parent(parents, gp, carriers) == y.joint:
+            return True
+    return False
+
+
 def _structural_reason(
     a: LinkShape, b: LinkShape, parents: Sequence[int], carriers: set[int]
 ) -> str | None:
@@ -141,6 +152,7 @@ def select_pairs(
     exclude: Sequence[Sequence[str]] = (),
     use_srdf: bool = True,
     geometry: str = "convex_hull",
+    neighbour_distance: float = 0.0,
     path: str = "pairs",
 ) -> PairSelection:
     r"""Every pair of bodies that can collide (``pairs: auto``), with the reasons for the rest.
@@ -154,6 +166,9 @@ def select_pairs(
         exclude: pairs left out whatever the rules say.
         use_srdf: honour the SRDF's ``disable_collisions``.
         geometry: kind of the shapes (``convex_hull`` or ``capsule``).
+        neighbour_distance: chain neighbours (two joints apart in one limb) closer than this in
+            the reference posture are left out [m]: their hulls sit close by construction, and
+            a damper on them would lock the joint between them (``0``: keep them all).
         path: YAML path for error messages.
 
     Returns:
@@ -185,8 +200,14 @@ def select_pairs(
     d = _reference_distances(robot, movable, geometry)
     pairs: list[Pair] = []
     for (a, b), dist in zip(movable, d, strict=True):
-        if dist <= contact_margin and _key(a, b) not in inc:
+        if _key(a, b) in inc:
+            pairs.append((a, b))
+        elif dist <= contact_margin:
             excluded[(a, b)] = f"in contact in the reference pose ({dist * 1e3:.1f} mm)"
+        elif dist < neighbour_distance and _chain_neighbours(
+            shapes[a], shapes[b], parents, carriers
+        ):
+            excluded[(a, b)] = f"chain neighbours close at rest ({dist * 1e3:.1f} mm)"
         else:
             pairs.append((a, b))
     return PairSelection(pairs, excluded, len(names))

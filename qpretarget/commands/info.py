@@ -13,6 +13,8 @@ HELP = """examples:
   qpretarget info configs/g1_augmentation.yaml --limits  joint position and velocity limits
   qpretarget info g1 --frames                           every frame of a bundled robot
   qpretarget info --robots                              the bundled robots
+  qpretarget info configs/g1_whole_body.yaml --pairs    every collision pair, and why the
+                                                        others are left out
 """
 
 
@@ -29,6 +31,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", action="store_true", help="list every frame")
     p.add_argument("--limits", action="store_true", help="list joint limits")
     p.add_argument("--robots", action="store_true", help="list the bundled robots")
+    p.add_argument(
+        "--pairs",
+        action="store_true",
+        help="self-collision: list every kept pair and every left-out pair with its reason",
+    )
     p.set_defaults(func=run)
 
 
@@ -95,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
         lines.append(f"  {c!r}")
         describe = getattr(c, "describe", None)
         if describe is not None:
-            lines.extend(f"    {x}" for x in describe())
+            full = args.pairs and c.type_name == "self_collision"
+            lines.extend(f"    {x}" for x in (describe(full=True) if full else describe()))
     q = ctrl.q
     inside = np.all((q >= ctrl.robot.q_min - 1e-12) & (q <= ctrl.robot.q_max + 1e-12))
     lines.append(f"reference posture inside joint limits: {bool(inside)}")

@@ -6,6 +6,21 @@ variable, or a fixed number of rows :math:`l \le C v \le u` (an equality is a ro
 :math:`l = u`; an inactive row has infinite bounds so the QP's shape never changes and the solver
 stays warm). ``importance`` orders what gives first when the hard constraints cannot all hold in a
 tick (lowest first; contacts and limits give last).
+
+**Hard and soft rows** (docs/reliability.md). Only what must hold is hard: the contact equalities
+and the box (joint position limits made viable under the velocity and acceleration limits, see
+:mod:`.acceleration_limits`). A row constraint that can conflict with them or with another one
+(collision and ground margins, the CoM polygon) is *soft*: the strategy gives each of its rows a
+slack :math:`s_i \ge 0` behind an exact (L1) penalty,
+
+.. math:: C_i v - s_i \le u_i, \qquad \text{cost} \mathrel{+}= w\, s_i + \tfrac{\epsilon}{2} s_i^2,
+
+so the tick's QP always has a solution and a conflict costs accuracy, not motion. With
+:math:`w` above the row's Lagrange multiplier the slack is exactly zero whenever the rows can hold
+(exact penalty: Nocedal & Wright 2006, Theorem 17.3; Fletcher 1987, 12.3), so a soft row is as
+hard as a hard one until the hard set leaves no room. :attr:`Constraint.soft` declares it (by
+default: rows of constraints with ``importance`` below :data:`SOFT_BELOW`), and
+:meth:`Constraint.penalty_weight` gives :math:`w`.
 """
 
 from __future__ import annotations
@@ -22,6 +37,15 @@ from ..registry import Registry
 from ..robot import RobotModel, RobotState
 
 CONSTRAINTS = Registry("constraint")
+
+#: Row constraints less important than this are soft unless they say otherwise (module docstring):
+#: ``support_polygon`` (60), ``self_collision`` (70), ``ground`` (75); ``contacts`` (100) is hard.
+SOFT_BELOW = 80
+#: Exact-penalty weight of the least important soft constraint, per unit of slack (the rows' own
+#: units, [m/s] for distances and the CoM): 9 times the largest CoM-polygon multiplier (1.1e4)
+#: measured on the wild-target scenario (docs/reliability.md). Each importance step of 10 multiplies
+#: it by 10, so the CoM polygon gives before a collision margin, and a margin before the ground.
+SOFT_WEIGHT = 1e5
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,6 +80,9 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
     importance: ClassVar[int] = 50
     #: The module overrides :meth:`compute_bounds` (the relaxation fallback slacks its box).
     has_bounds: ClassVar[bool] = False
+    #: Rows may give behind an exact-penalty slack (module docstring); ``None``: soft when
+    #: ``importance < SOFT_BELOW``. Box bounds are never soft (they give in the bound merge).
+    soft: ClassVar[bool | None] = None
 
     def __init__(self, name: str | None = None) -> None:
         if name is not None and (not isinstance(name, str) or not name):
@@ -65,6 +92,17 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
         self.robot: RobotModel | None = None
         #: Where the constraint sits in the YAML (``constraints[i]``), for error messages.
         self.yaml_path = ""
+
+    def is_soft(self) -> bool:
+        """Whether this constraint's rows get exact-penalty slacks (see :attr:`soft`)."""
+        return self.importance < SOFT_BELOW if self.soft is None else bool(self.soft)
+
+    def penalty_weight(self) -> float:
+        r"""Exact-penalty weight :math:`w` of this constraint's slacks [cost per row unit].
+
+        :math:`w = ` :data:`SOFT_WEIGHT` :math:`\cdot 10^{(\text{importance} - 60)/10}`.
+        """
+        return float(SOFT_WEIGHT * 10.0 ** ((self.importance - 60) / 10.0))
 
     def bind(self, robot: RobotModel, *, path: str = "") -> None:
         """Resolve names and fix :attr:`n_rows`; raise here on bad names."""

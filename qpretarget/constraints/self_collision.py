@@ -18,22 +18,27 @@ given per second (``gain``: bound :math:`k (d - d_s)`) or per tick (``gain_per_t
 :math:`\gamma` per tick to first order). Below :math:`d_s` the bound is negative: the pair is
 pushed apart, at most at ``recovery_speed``.
 
-The block has one row per pair (or ``max_rows`` rows given to the closest pairs); rows of pairs
-beyond :math:`d_i` are zero with infinite bounds, so the QP keeps its shape and the solver stays
-warm. The importance is 70: when hard constraints conflict, collisions give before contacts and
-joint limits (see :mod:`qpretarget.control.relaxation`).
+The block has one row per pair (or ``max_rows`` rows given to the closest pairs, each pair
+keeping its row while it stays among them); rows of pairs beyond :math:`d_i` are zero with infinite
+bounds, so the QP keeps its shape and the solver stays warm. The importance is 85: when hard
+constraints conflict, the support polygon (60), the ground (75) and the acceleration limits (80)
+give before a collision, contacts and joint limits after it (see
+:mod:`qpretarget.control.relaxation`). Measured on the shared clips: at 70, below the
+acceleration limits, an arm approaching fast could not be stopped within them and went through
+(opensim_walking2: shoulder roll link into the torso, 2 frames, 0.8 mm on the meshes).
 """
 
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import numpy as np
-import pinocchio as pin
 
 from ..collision import GEOMETRIES, CollisionModel, LinkShape, adjacent_links, link_shapes
+from ..collision.pairs import select_pairs
 from ..errors import ConfigError, UnknownNameError
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
@@ -42,7 +47,10 @@ from .base import CONSTRAINTS, Constraint, ConstraintBlock
 #: Smallest trust-region scale (the step bound shrinks at most by its square root, 1/64).
 MIN_TRUST_SCALE = 1.0 / 4096
 #: QP rows of an ``auto`` pair set unless ``max_rows`` says otherwise.
-AUTO_MAX_ROWS = 24
+AUTO_MAX_ROWS = 12
+#: ``trust_gap_fraction`` of an ``auto`` pair set unless given: a pair's linearization may err by
+#: a tenth of its gap to the safety distance (pairs near at rest stay within d_i all along).
+AUTO_TRUST_GAP = 0.1
 
 
 def damper_rate(
@@ -158,6 +166,8 @@ class DistanceDamper(Constraint):
             raise ConfigError(f"max_rows must be a positive integer or null, got {max_rows!r}.")
         self.max_rows = max_rows
         self.broad_phase = bool(broad_phase)
+        #: Trust region of a pair: max(trust_region, trust_gap * (d - safety)) (0: fixed).
+        self.trust_gap = 0.0
         self.model: CollisionModel | None = None
         self.pairs: list[tuple[str, str]] = []
         self.safety = np.zeros(0)
@@ -183,6 +193,8 @@ class DistanceDamper(Constraint):
         self._pred_pairs = np.zeros(0, dtype=int)
         self._pred = np.zeros(0)
         self._last_rows = np.zeros(0, dtype=int)
+        self._slot = np.full(P, -1)  # capped rows: QP row of each pair (-1: none)
+        self._slot_pair = np.full(self.n_rows, -1)  # pair of each QP row (-1: free)
         self._last_pairs = np.zeros(0, dtype=int)
         self._gap = np.zeros(0)
         uniform = bool(np.all(self.safety == self.safety[0])) if P else True
@@ -215,6 +227,11 @@ class DistanceDamper(Constraint):
         self._sqrt_scale.fill(1.0)
         self._scaled = False
         self._pred_pairs = np.zeros(0, dtype=int)
+        self._C.fill(0.0)  # a reset run is the same as a fresh one (rows and their slots)
+        self._u.fill(np.inf)
+        self._last_rows = np.zeros(0, dtype=int)
+        self._slot.fill(-1)
+        self._slot_pair.fill(-1)
 
     def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
         """Remember the first-order prediction of the active pairs' next distances."""
@@ -242,9 +259,9 @@ class DistanceDamper(Constraint):
         assert model is not None
         model.update(state, self.d_i)
         act = model.active
-        grad = model.gradients(state) if act.size else self._grad_act[:0]
         if self._direct or act.size == 0:
             pairs = act
+            grad = model.gradients(state) if act.size else self._grad_act[:0]
         else:  # the pairs that get a row this tick (armed, closest max_rows)
             sel = np.flatnonzero(self._row_mask(act))
             pairs = act[sel]
@@ -252,17 +269,21 @@ class DistanceDamper(Constraint):
                 gap = model.distances[pairs] - self.safety[pairs]
                 sel = np.sort(sel[np.argsort(gap, kind="stable")[: self.n_rows]])
                 pairs = act[sel]
-            grad = grad[sel]
+            grad = model.gradients(state, sel)
         self._grad_act, self._row_pairs = grad, pairs
         self._fp_state, self._fp = state, fp
         if self._pred_pairs.size:  # adapt the trust region to last tick's prediction error
             pairs = self._pred_pairs
             err = model.distances[pairs] - self._pred
-            bad = err < -self.trust_region
+            assert self.trust_region is not None  # predictions are made only with one
+            tol = np.full(pairs.size, self.trust_region)
+            if self.trust_gap > 0:
+                tol = np.maximum(tol, self.trust_gap * (self._pred - self.safety[pairs]))
+            bad = err < -tol
             if bad.any():
                 # The step's error is first order in the step where facets switch, and the step
                 # goes as sqrt(scale): shrink by (eps / err)^2, at least by half.
-                f = np.clip((self.trust_region / err[bad]) ** 2, 1.0 / 64, 0.5)
+                f = np.clip((tol[bad] / err[bad]) ** 2, 1.0 / 64, 0.5)
                 pb = pairs[bad]
                 self._scale[pb] = np.maximum(self._scale[pb] * f, MIN_TRUST_SCALE)
                 self._scaled = True
@@ -298,6 +319,12 @@ class DistanceDamper(Constraint):
         if pairs.size == 0:
             return None
         step = self._step0[pairs]
+        if self.trust_gap > 0:  # a pair far from its safety distance tolerates a larger error
+            assert self.model is not None and self.trust_region is not None
+            gap = self.model.distances[pairs] - self.safety[pairs]
+            step = (
+                step * np.sqrt(np.maximum(1.0, self.trust_gap * gap / self.trust_region))[:, None]
+            )
         if self._scaled:
             step = step * self._sqrt_scale[pairs, None]
         np.multiply(step.min(axis=0), 1.0 / dt, out=self._tr_ub)
@@ -313,7 +340,7 @@ class DistanceDamper(Constraint):
         C, hi = self._C, self._u
         last = self._last_rows
         pairs = self._row_pairs
-        rows = pairs if self.max_rows is None else np.arange(pairs.size)
+        rows = pairs if self.max_rows is None else self._slots(pairs)
         if last.size and last.tobytes() != rows.tobytes():
             C[last] = 0.0  # clear last tick's rows (unless the same rows are rewritten)
             hi[last] = np.inf
@@ -328,6 +355,28 @@ class DistanceDamper(Constraint):
             self._gap = self._gap[:0]
         self.last_time = self._t_acc + time.perf_counter() - t0
         return ConstraintBlock(self.name, C, self._l, hi)
+
+    def _slots(self, pairs: np.ndarray) -> np.ndarray:
+        """QP rows of this tick's ``pairs`` (capped rows).
+
+        A pair keeps its row while it stays among the closest, new pairs take the free rows, so
+        the rows the solver's warm start remembers keep their meaning from tick to tick.
+        """
+        slot, owner = self._slot, self._slot_pair
+        held = owner >= 0
+        if held.any():
+            keep = np.zeros(slot.size, dtype=bool)
+            keep[pairs] = True
+            gone = held & ~keep[np.maximum(owner, 0)]
+            if gone.any():
+                slot[owner[gone]] = -1
+                owner[gone] = -1
+        new = pairs[slot[pairs] < 0]
+        if new.size:
+            free = np.flatnonzero(owner < 0)[: new.size]
+            slot[new] = free
+            owner[free] = new
+        return slot[pairs]
 
     @property
     def min_distance(self) -> float:
@@ -389,9 +438,14 @@ class SelfCollision(DistanceDamper):
         links: ``auto`` only: restrict the candidate links to these (default: every link with
             collision geometry).
         exclude: pairs removed from the list (``auto`` or explicit).
+        include: ``auto`` only: pairs added back whatever the rules say (e.g. chain neighbours
+            that do collide on this robot).
         touch_distance: ``auto`` only: pairs closer than this in the reference posture are left
-            out as touching [m]; pairs closer than ``d_s`` (but not touching) keep half their
-            rest distance as safety distance.
+            out as touching [m].
+        rest_fraction: ``auto`` only: a pair's safety distance is
+            :math:`\min(d_s, \rho\, d_{rest})`, :math:`d_{rest}` its distance in the reference
+            posture: pairs that sit close by construction (a shoulder beside the torso, a hip
+            motor beside the pelvis) are kept apart without locking the joint between them.
         use_srdf: ``auto`` only: leave out the pairs the robot's SRDF disables.
         max_rows: number of QP rows; the closest active pairs get them. Default: one row per
             pair for a listed pair set, :data:`AUTO_MAX_ROWS` for ``auto`` (hundreds of pairs).
@@ -399,6 +453,12 @@ class SelfCollision(DistanceDamper):
         trust_region: tolerated second-order error of the linearization [m]: while a pair is
             within :math:`d_i` the rotations moving its links are bounded per tick
             (:meth:`DistanceDamper.compute_bounds`); ``null`` turns the bound off.
+        trust_gap_fraction: the trust region of a pair grows with its gap to the safety
+            distance: :math:`\max(\varepsilon, f\,(d - d_s))` (``auto`` default 0.1, listed
+            pairs 0): an error of a tenth of the gap cannot close it in one tick, and pairs that
+            sit within :math:`d_i` at rest do not hold the arms back.
+        optional: on a robot without collision geometry, run without this constraint (a
+            warning, and a note in ``qpretarget info``) instead of refusing the config.
         hull_vertices: lighter conservative hulls of at most this many vertices (faster GJK,
             distances smaller by at most twice their inflation); ``null``: exact hulls.
         name: constraint name.
@@ -407,7 +467,7 @@ class SelfCollision(DistanceDamper):
         ConfigError: bad values; UnknownNameError: a link without collision geometry.
     """
 
-    importance = 70
+    importance = 85
 
     def __init__(
         self,
@@ -422,12 +482,16 @@ class SelfCollision(DistanceDamper):
         geometry: str = "convex_hull",
         links: Sequence[str] | None = None,
         exclude: Sequence[Sequence[str]] | None = None,
+        include: Sequence[Sequence[str]] | None = None,
         touch_distance: float = 0.005,
+        rest_fraction: float = 0.25,
         use_srdf: bool = True,
         max_rows: int | None = None,
         broad_phase: bool = True,
         trust_region: float | None = 2e-4,
         hull_vertices: int | None = None,
+        trust_gap_fraction: float | None = None,
+        optional: bool = False,
         name: str | None = None,
     ) -> None:
         super().__init__(
@@ -436,6 +500,24 @@ class SelfCollision(DistanceDamper):
             broad_phase=broad_phase, trust_region=trust_region, hull_vertices=hull_vertices,
             name=name,
         )  # fmt: skip
+        if not isinstance(optional, bool):
+            raise ConfigError(f"optional must be true or false, got {optional!r}.")
+        self.optional = optional
+        #: The robot has no collision geometry and the constraint is ``optional``: no rows.
+        self.disabled = False
+        if trust_gap_fraction is None:
+            self.trust_gap = AUTO_TRUST_GAP if pairs == "auto" else 0.0
+        elif (
+            isinstance(trust_gap_fraction, bool)
+            or not isinstance(trust_gap_fraction, (int, float))
+            or not 0.0 <= trust_gap_fraction <= 1.0
+        ):
+            raise ConfigError(
+                "trust_gap_fraction must be a number in [0, 1] or null, got "
+                f"{trust_gap_fraction!r}."
+            )
+        else:
+            self.trust_gap = float(trust_gap_fraction)
         if isinstance(pairs, str):
             if pairs != "auto":
                 raise ConfigError(
@@ -454,9 +536,17 @@ class SelfCollision(DistanceDamper):
         self._pairs_spec = pairs
         self._links_spec = None if links is None else [str(x) for x in links]
         self._exclude = [tuple(str(x) for x in p) for p in (exclude or [])]
+        self._include = [tuple(str(x) for x in p) for p in (include or [])]
+        if include and pairs != "auto":
+            raise ConfigError("`include` adds pairs to pairs: auto; list them in `pairs` instead.")
+        if any(len(p) != 2 for p in self._include):
+            raise ConfigError(f"include must be a list of [link_a, link_b], got {include!r}.")
         if any(len(p) != 2 for p in self._exclude):
             raise ConfigError(f"exclude must be a list of [link_a, link_b], got {exclude!r}.")
         self.touch_distance = float(touch_distance)
+        self.rest_fraction = positive_float(rest_fraction, "rest_fraction")
+        if self.rest_fraction > 1:
+            raise ConfigError(f"rest_fraction must be in (0, 1], got {rest_fraction}.")
         self.use_srdf = bool(use_srdf)
         #: Pair distances in the reference posture [m] (set by bind; reported by describe()).
         self.reference_distances: np.ndarray | None = None
@@ -470,12 +560,25 @@ class SelfCollision(DistanceDamper):
         super().bind(robot, path=path)
         p = f"{path}." if path else ""
         shapes = link_shapes(robot, self.geometry)
+        self.left_out = {}
+        self.notes = []
+        if len(shapes) < 2:
+            msg = (
+                f"robot {robot.name!r} has no collision geometry (links with collision shapes: "
+                f"{len(shapes)}), so self-collision cannot be checked."
+            )
+            if not self.optional:
+                raise ConfigError(
+                    msg + " Use a URDF with <collision> elements, remove the self_collision "
+                    "constraint, or set `optional: true` in it to run without it.",
+                    path=path,
+                )
+            self._disable(robot, msg)
+            return
         exclude = {
             frozenset(resolve_link(robot, shapes, x, f"{p}exclude[{k}]") for x in pair)
             for k, pair in enumerate(self._exclude)
         }
-        self.left_out = {}
-        self.notes = []
         if self._pairs_spec == "auto":
             pairs = self._auto_pairs(robot, shapes, exclude, p)
         else:
@@ -524,20 +627,56 @@ class SelfCollision(DistanceDamper):
                         f"(< d_s = {self.d_s * 1000:.0f} mm): it is pushed apart from the start"
                     )
         else:
-            # Pairs already closer than d_s at rest (neighbours along a limb) would be pushed
-            # apart from the first tick, against the contacts: they keep half their rest gap.
-            close = np.flatnonzero(ref < self.d_s)
+            # Pairs close at rest (neighbours along a limb, a shoulder beside the torso) would
+            # lock the joint between them at d_s: their safety distance is a fraction of their
+            # rest distance, min(d_s, rest_fraction * rest) (> 0: the hulls, hence the meshes,
+            # stay apart).
+            close = np.flatnonzero(self.rest_fraction * ref < self.d_s)
             if close.size:
-                self.safety[close] = 0.5 * ref[close]
+                self.safety[close] = self.rest_fraction * ref[close]
                 examples = ", ".join(
                     f"{pairs[i][0]}/{pairs[i][1]} ({ref[i] * 1000:.1f} mm)" for i in close[:3]
                 )
                 more = f" (+{close.size - 3} more)" if close.size > 3 else ""
                 self.notes.append(
-                    f"{close.size} pairs are closer than d_s in the reference posture: their "
-                    f"safety distance is half their rest distance: {examples}{more}"
+                    f"{close.size} pairs are closer than d_s / rest_fraction in the reference "
+                    f"posture: their safety distance is {self.rest_fraction:g} x their rest "
+                    f"distance: {examples}{more}"
                 )
         self._setup_rows(robot)
+
+    def _disable(self, robot: RobotModel, why: str) -> None:
+        """``optional: true`` on a robot without collision geometry: no pairs, no rows."""
+        self.disabled = True
+        self.pairs = []
+        self.model = None
+        self.n_rows = 0
+        self._C = np.zeros((0, robot.nv))
+        self._l = self._u = np.zeros(0)
+        self._last_pairs = self._row_pairs = np.zeros(0, dtype=int)
+        self._gap = np.zeros(0)
+        self._grad = np.zeros((0, robot.nv))
+        self.notes.append(f"disabled (optional: true): {why}")
+        warnings.warn(f"self_collision is off: {why}", stacklevel=2)
+
+    def reset(self, state: RobotState) -> None:
+        if not self.disabled:
+            super().reset(state)
+
+    def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
+        if self.disabled:
+            return ConstraintBlock(self.name, self._C, self._l, self._u)
+        return super().compute_rows(state, dt)
+
+    def compute_bounds(self, state: RobotState, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
+        if self.disabled:
+            return None
+        return super().compute_bounds(state, dt)
+
+    def distances_and_gradients(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
+        if self.disabled:
+            return np.zeros(0), self._grad
+        return super().distances_and_gradients(state)
 
     def _auto_pairs(
         self,
@@ -546,59 +685,48 @@ class SelfCollision(DistanceDamper):
         exclude: set[frozenset[str]],
         p: str,
     ) -> list[tuple[str, str]]:
-        """All link pairs minus adjacent, SRDF-disabled, excluded and touching ones (in order)."""
+        """``pairs: auto``: :func:`~qpretarget.collision.pairs.select_pairs` (one definition).
+
+        Every pair of the candidate links minus same-joint, adjacent, SRDF-disabled, excluded
+        and touching pairs, and chain neighbours already within :math:`d_i` at rest; the
+        ``include:`` pairs come back whatever the rules say. The reasons go to :attr:`left_out`.
+        """
         if self._links_spec is not None:
-            links = []
+            links: list[str] = []
             for k, name in enumerate(self._links_spec):
                 link = resolve_link(robot, shapes, name, f"{p}links[{k}]")
                 if link not in links:
                     links.append(link)
-        else:
-            links = list(shapes)  # URDF geometry order: deterministic
-        candidates = [(a, b) for i, a in enumerate(links) for b in links[i + 1 :]]
-        kept = []
-        for a, b in candidates:
-            if adjacent_links(robot, a, b, shapes):
-                self.left_out.setdefault("adjacent links (same or parent/child joint)", []).append(
-                    (a, b)
-                )
-            elif frozenset((a, b)) in exclude:
-                self.left_out.setdefault("excluded in YAML", []).append((a, b))
-            else:
-                kept.append((a, b))
-        if self.use_srdf and robot.srdf_path is not None and kept:
-            gm = pin.GeometryModel()
-            index = {}
-            for link in links:
-                index[link] = gm.addGeometryObject(shapes[link].geometry_object())
-            for a, b in kept:
-                gm.addCollisionPair(pin.CollisionPair(index[a], index[b]))
-            pin.removeCollisionPairs(robot.model, gm, str(robot.srdf_path), False)
-            names = {i: n for n, i in index.items()}
-            remaining = {frozenset((names[cp.first], names[cp.second])) for cp in gm.collisionPairs}
-            disabled = [pr for pr in kept if frozenset(pr) not in remaining]
-            if disabled:
-                self.left_out[f"disabled by the SRDF ({robot.srdf_path.name})"] = disabled
-            kept = [pr for pr in kept if frozenset(pr) in remaining]
-        if kept:
-            cm = CollisionModel(robot, kept, geometry=self.geometry, broad_phase=False)
-            d = cm.compute_all(RobotState(robot))[0]
-            touching = [pr for pr, di in zip(kept, d, strict=True) if di < self.touch_distance]
-            if touching:
-                self.left_out[
-                    f"touching in the reference posture (d < {self.touch_distance * 1000:.0f} mm)"
-                ] = touching
-            kept = [pr for pr, di in zip(kept, d, strict=True) if di >= self.touch_distance]
-        return kept
+            shapes = {n: shapes[n] for n in shapes if n in links}
+        include = [
+            [resolve_link(robot, shapes, str(x), f"{p}include[{k}]") for x in pair]
+            for k, pair in enumerate(self._include)
+        ]
+        sel = select_pairs(
+            robot, shapes, contact_margin=self.touch_distance, include=include,
+            exclude=[sorted(e) for e in exclude], use_srdf=self.use_srdf,
+            geometry=self.geometry, neighbour_distance=self.d_i, path=f"{p}pairs",
+        )  # fmt: skip
+        for pair, why in sel.excluded.items():
+            self.left_out.setdefault(why.split(" (")[0], []).append(pair)
+        return sel.pairs
 
     # ------------------------------------------------------------------ reporting
-    def describe(self) -> list[str]:
-        """Lines for ``qpretarget info``: the pairs kept and why the others were left out."""
+    def describe(self, full: bool = False) -> list[str]:
+        """Lines for ``qpretarget info``: the pair count, and why the other pairs were left out.
+
+        Args:
+            full: list every kept pair (with its rest distance and safety distance) and every
+                left-out pair with its reason (``qpretarget info CONFIG --pairs``); otherwise
+                counts per reason with three examples, and the kept pairs only when listed.
+        """
         model = self.model
         src = "auto" if self._pairs_spec == "auto" else "listed"
+        n_out = sum(len(v) for v in self.left_out.values())
         lines = [
-            f"{len(self.pairs)} pairs ({src}), geometry {self.geometry}, d_s={self.d_s} m, "
-            f"d_i={self.d_i} m, {self.gain_form}={self.gain_value}, {self.n_rows} QP rows",
+            f"{len(self.pairs)} pairs ({src}; {n_out} left out), geometry {self.geometry}, "
+            f"d_s={self.d_s} m, d_i={self.d_i} m, {self.gain_form}={self.gain_value}, "
+            f"{self.n_rows} QP rows (the closest pairs get them)",
         ]
         if model is not None:
             kinds: dict[str, int] = {}
@@ -610,13 +738,23 @@ class SelfCollision(DistanceDamper):
                 + ")"
             )
         ref = self.reference_distances
-        for k, (a, b) in enumerate(self.pairs):
-            dist = f"  {ref[k] * 1000:7.1f} mm at reference" if ref is not None else ""
-            lines.append(f"  keep {a} / {b}{dist}")
+        if full or self._pairs_spec != "auto":
+            for k, (a, b) in enumerate(self.pairs):
+                dist = (
+                    f"  {ref[k] * 1000:7.1f} mm at reference, safety {self.safety[k] * 1000:.1f} mm"
+                    if ref is not None else ""
+                )  # fmt: skip
+                lines.append(f"  keep {a} / {b}{dist}")
         for reason, prs in self.left_out.items():
+            if full:
+                lines.append(f"left out: {len(prs)} {reason}:")
+                lines.extend(f"  {a} / {b}" for a, b in prs)
+                continue
             examples = ", ".join(f"{a}/{b}" for a, b in prs[:3])
             more = f" (+{len(prs) - 3} more)" if len(prs) > 3 else ""
             lines.append(f"left out: {len(prs)} {reason}: {examples}{more}")
+        if not full and self._pairs_spec == "auto":
+            lines.append("(`qpretarget info CONFIG --pairs` lists every pair and its reason)")
         lines.extend(f"note: {n}" for n in self.notes)
         return lines
 

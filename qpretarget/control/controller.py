@@ -38,6 +38,7 @@ from ..robot import RobotModel, RobotState, load_robot
 from ..solvers import make_solver
 from ..solvers.base import DEFAULT_SOLVER
 from ..strategies import STRATEGIES, Strategy, TickProblem
+from ..strategies.base import SoftRows
 from ..tasks import TASKS, Task
 from ..weighting.base import REGULARIZATIONS, Regularization
 from ..yamlio import load_yaml
@@ -203,7 +204,19 @@ class Controller:
             self.n_rows,
             lambda: make_solver(self.solver_spec, path="solver"),
         )
+        soft = self.soft_rows() if self.level == "velocity" else []
+        #: The strategy gives the soft rows exact-penalty slacks (else the fallback relaxes them).
+        self.soft_in_qp = bool(soft) and strategy.set_soft_rows(soft)
         return strategy
+
+    def soft_rows(self) -> list[SoftRows]:
+        """The rows of the soft row constraints (``Constraint.is_soft``) and their weights."""
+        out, i = [], 0
+        for con in self.row_constraints:
+            if con.is_soft():
+                out.append(SoftRows(con.name, slice(i, i + con.n_rows), con.penalty_weight()))
+            i += con.n_rows
+        return out
 
     def _build_level(self) -> Level:
         """The :class:`Level` of the YAML ``level:``."""
@@ -243,6 +256,12 @@ class Controller:
             raise ConfigError(f"{path}: invalid YAML{where}: {exc.problem or exc}") from None
         except yaml.YAMLError as exc:
             raise ConfigError(f"{path}: invalid YAML: {exc}") from None
+        except UnicodeDecodeError as exc:
+            raise ConfigError(
+                f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})."
+            ) from None
+        except (IsADirectoryError, PermissionError) as exc:
+            raise ConfigError(f"{path}: cannot be read ({exc.strerror}).") from None
         if not isinstance(cfg, Mapping):
             raise ConfigError(f"{path}: the file must hold a mapping (robot:, tasks:, ...).")
         try:

@@ -42,7 +42,8 @@ import numpy as np
 
 from ..errors import ConfigError, close_matches_hint
 from ..problem import QPProblem
-from ..solvers import ProxSuiteSolver, make_solver
+from ..solvers import make_solver
+from ..solvers.daqp_ import DaqpSolver
 from ..strategies import TickProblem
 from ..validation import positive_float
 
@@ -112,8 +113,10 @@ def make_fallback(controller: Any, spec: Mapping[str, Any] | None) -> Fallback |
     if ratio <= 1:
         raise ConfigError(f"ratio must be > 1, got {ratio!r}.", path="fallback.ratio")
     solver_spec = spec.get("solver")
+    # DAQP by default: deterministic to the last bit (a ProxSuite phase 1 made runs differ across
+    # processes) and it solved the wild-target relaxations ProxSuite called primal infeasible.
     solver = (
-        ProxSuiteSolver(eps_abs=1e-9, max_iter=10000, warm_start=False)
+        DaqpSolver(warm_start=False)
         if solver_spec is None
         else make_solver(solver_spec, path="fallback.solver")
     )

@@ -1,10 +1,17 @@
 # SPDX-License-Identifier: Apache-2.0
 r"""Velocity level (``level: velocity``, the default): the QP's variable is :math:`v`.
 
-One solve: the strategy solves the tick's problem for :math:`v`; when it fails, the relaxation
-fallback (``control/relaxation.py``) relaxes the least important hard constraints; when that
-fails too, the robot holds (:math:`v = 0`). The configuration is integrated explicitly,
-:math:`q^+ = q \oplus v\,dt`.
+One solve: the strategy solves the tick's problem for :math:`v`. The soft rows (collision and
+ground margins, the CoM polygon: ``constraints/base.py``) carry exact-penalty slacks inside that
+QP, so from a state the controller produced it always has a solution; a slack that is used is
+reported in ``StepResult.relaxed`` (status ``relaxed``). When the QP still fails as infeasible
+(a start outside the hard set, a strategy without slacks), the relaxation fallback
+(``control/relaxation.py``) relaxes the least important hard constraints. When the solver runs out
+of its iteration budget (:data:`BUDGET_STATUSES`) the fallback is skipped (it would cost two more
+solves) and so is a fallback that fails: the tick *brakes* (:func:`braking_velocity`: every joint
+slows down at its acceleration limit within the tick's box, the floating base keeps the contacts
+to first order), is flagged ``held`` and says why — never :math:`v = 0` from full speed. The
+configuration is integrated explicitly, :math:`q^+ = q \oplus v\,dt`.
 """
 
 from __future__ import annotations
@@ -17,6 +24,33 @@ from ..robot import RobotModel
 from ..strategies import Strategy, StrategyResult, TickProblem
 from .levels import Level, LevelOutcome
 from .relaxation import Fallback
+
+#: Solver statuses meaning "ran out of its per-tick budget", not "infeasible": no fallback. (An
+#: active-set solver says so reliably; ProxSuite's iteration limit is also how it often ends on
+#: an infeasible QP, so it still goes to the fallback.)
+BUDGET_STATUSES = frozenset({"DAQP_ITERLIMIT", "DAQP_CYCLING"})
+
+
+def braking_velocity(tp: TickProblem) -> np.ndarray:
+    r"""The velocity of a tick with no usable QP solution: brake, keep the feet.
+
+    :math:`v_b = \operatorname{clip}(0, lb, ub)`: the box merges the acceleration limits around
+    the previous velocity, so every limited joint slows down by at most :math:`a_{max} dt`
+    towards zero (and stays viable for its position limits). Then the smallest correction
+    :math:`\Delta = E^+ (b - E v_b)` meets the tick's equality rows :math:`E v = b` (the
+    contacts), and the result is clipped to the box again. No solver, bounded time.
+    """
+    v = np.clip(0.0, tp.lb, tp.ub)
+    eq = np.isfinite(tp.u) & (tp.l == tp.u)
+    if eq.any():
+        E = tp.C[eq]
+        r = tp.u[eq] - E @ v
+        if np.all(np.isfinite(r)) and np.all(np.isfinite(E)):
+            dv, *_ = np.linalg.lstsq(E, r, rcond=1e-10)
+            if np.all(np.isfinite(dv)):
+                v = np.clip(v + dv, tp.lb, tp.ub)
+    v[~np.isfinite(v)] = 0.0
+    return v
 
 
 def solve_with_fallback(
@@ -31,7 +65,9 @@ def solve_with_fallback(
     res = strategy.solve(tp)
     x = res.x if res.success and res.x is not None and np.all(np.isfinite(res.x)) else None
     relaxed: dict[str, float] | None = None
-    if x is None and fallback is not None:
+    if x is not None and res.slack:
+        relaxed = dict(res.slack)
+    if x is None and fallback is not None and res.status not in BUDGET_STATUSES:
         fb = fallback.solve(tp, res)
         if fb is not None and fb.x is not None and np.all(np.isfinite(fb.x)):
             x = fb.x
@@ -72,10 +108,22 @@ class VelocityLevel(Level):
             tp.state.v, tp.state.q, "ok", res.status, res.solve_time, res.iterations,
             dict(tp.bound_gave),
         )  # fmt: skip
-        if fb_relaxed is not None:
+        if tp.bound_gave:
+            out.messages.append(
+                f"tick {tp.tick}: box bounds gave to more important ones (rad/s): "
+                f"{_fmt(tp.bound_gave)}."
+            )
+        if fb_relaxed is not None and res.success:
             out.relaxed.update(fb_relaxed)
             out.messages.append(
-                f"tick {tp.tick}: hard constraints conflicted ({res.status}); relaxed {fb_relaxed}."
+                f"tick {tp.tick}: soft constraints gave (exact-penalty slack, row units): "
+                f"{_fmt(fb_relaxed)}."
+            )
+        elif fb_relaxed is not None:
+            out.relaxed.update(fb_relaxed)
+            out.messages.append(
+                f"tick {tp.tick}: hard constraints conflicted ({res.status}); relaxed "
+                f"{_fmt(fb_relaxed)}."
                 if fb_relaxed
                 else f"tick {tp.tick}: the QP solver reported {res.status}; the fallback "
                 "solved it without relaxing anything."
@@ -83,11 +131,16 @@ class VelocityLevel(Level):
         if out.relaxed:
             out.status = "relaxed"
         if x is None:
-            out.messages.append(
-                f"tick {tp.tick}: no usable QP solution (solver status {res.status}); "
-                "holding the configuration (v = 0)."
+            why = (
+                "the solver ran out of its per-tick budget"
+                if res.status in BUDGET_STATUSES
+                else "no usable QP solution"
             )
-            x = np.zeros(self.robot.nv)
+            out.messages.append(
+                f"tick {tp.tick}: {why} (solver status {res.status}); braking at the "
+                "acceleration limits with the feet kept (a bug to report if it repeats)."
+            )
+            x = braking_velocity(tp)
             out.status = "held"
         else:
             # Solvers meet bounds to their tolerance; the box is cheap to meet exactly.
@@ -97,4 +150,8 @@ class VelocityLevel(Level):
         return out
 
 
-__all__ = ["VelocityLevel", "solve_with_fallback"]
+def _fmt(amounts: dict[str, float]) -> str:
+    return ", ".join(f"{k} {v:.3g}" for k, v in amounts.items()) or "nothing"
+
+
+__all__ = ["BUDGET_STATUSES", "VelocityLevel", "braking_velocity", "solve_with_fallback"]

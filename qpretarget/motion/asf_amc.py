@@ -142,6 +142,16 @@ class _AsfParse:
     hierarchy_seen: bool = False
 
 
+def _text_lines(path: Path) -> list[str]:
+    """Lines of an ASF/AMC file; a clear error for one that is not UTF-8 text."""
+    try:
+        return path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError as exc:
+        raise MotionFormatError(
+            path, f"not a text file ({exc.reason} at byte {exc.start})"
+        ) from None
+
+
 def read_asf(path: str | Path) -> AsfSkeleton:
     """Parse an ASF skeleton file (LF or CRLF line endings).
 
@@ -150,7 +160,7 @@ def read_asf(path: str | Path) -> AsfSkeleton:
             ``:hierarchy`` or vice versa; the message names the line.
     """
     path = Path(path)
-    lines = path.read_text(encoding="utf-8", errors="strict").splitlines()
+    lines = _text_lines(path)
     state = _AsfParse(path)
     section = ""
     readers = {
@@ -424,7 +434,7 @@ def read_amc(path: str | Path, skeleton: AsfSkeleton) -> tuple[dict[str, np.ndar
             bone; wrong number of values; non-numeric value. The message names line and frame.
     """
     path = Path(path)
-    lines = path.read_text(encoding="utf-8").splitlines()
+    lines = _text_lines(path)
     expected = {"root": skeleton.root_order}
     expected.update({name: b.dof for name, b in skeleton.bones.items() if b.dof})
     state = _AmcParse(path, expected, skeleton.angle_unit, {name: [] for name in expected})

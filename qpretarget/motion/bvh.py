@@ -100,11 +100,14 @@ class _Tokens:
         for _ in range(count):
             token, line = self.take()
             try:
-                values.append(float(token))
+                value = float(token)
             except ValueError:
+                value = math.nan
+            if not math.isfinite(value):
                 raise MotionFormatError(
                     self.path, f"expected {count} numbers for {what}, found {token!r}", line=line
                 ) from None
+            values.append(value)
         return np.array(values)
 
 
@@ -226,6 +229,11 @@ def _parse_motion(
     return values.reshape(num_frames, num_channels), frame_time
 
 
+#: Longest plausible frame period [s]: beyond it the header is corrupt (a 1e30 s frame time once
+#: went through and broke every later time computation).
+MAX_FRAME_TIME = 10.0
+
+
 def _motion_header(path: Path, lines: list[str], motion_line: int) -> tuple[int, float]:
     """``Frames:`` and ``Frame Time:`` (the two lines after ``MOTION``), checked."""
 
@@ -249,10 +257,11 @@ def _motion_header(path: Path, lines: list[str], motion_line: int) -> tuple[int,
         frame_time = float(time_text)
     except ValueError:
         frame_time = math.nan
-    if not frame_time > 0:
+    if not 0 < frame_time <= MAX_FRAME_TIME:
         raise MotionFormatError(
             path,
-            f"Frame Time must be a positive number of seconds, found {time_text!r}",
+            f"Frame Time must be a positive number of seconds up to {MAX_FRAME_TIME:g}, found "
+            f"{time_text!r}",
             line=motion_line + 2,
         )
     if num_frames < 1:
@@ -416,7 +425,10 @@ def read_bvh(
     offsets = np.array([j.offset for j in joints])
     rest_positions, _ = forward_kinematics(parents, list(offsets), [None] * len(joints))
     extent = float(np.ptp(rest_positions[0], axis=0).max())
-    scale, unit = _length_scale(length_scale, extent)
+    try:
+        scale, unit = _length_scale(length_scale, extent)
+    except ValueError as exc:  # an absurd or empty skeleton (corrupt OFFSETs): the file's fault
+        raise MotionFormatError(path, str(exc)) from None
     translations, rotations = _joint_motions(joints, values, scale)
     return skeleton_motion(
         [j.name for j in joints],

@@ -90,6 +90,11 @@ def summarize_run(
     if support is not None and len(support) and str(support[0]):
         changes = [0] + [k for k in range(1, T) if support[k] != support[k - 1]]
         out["support_states"] = [(float(traj.t[k]), str(support[k])) for k in changes]
+    from ..analysis.mesh_audit import audit_run  # every body pair on the meshes (one definition)
+
+    audit = audit_run(q, robot)
+    if audit is not None:
+        out["mesh_self_collision"] = audit.to_dict(n_worst=3)
     human, reason = human_metrics_or_reason(traj, robot)
     if human is not None:
         out["human"] = human
@@ -126,6 +131,11 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
     if summary.get("feet_drift_mm"):
         drift = ", ".join(f"{k} {v:.3f} mm" for k, v in summary["feet_drift_mm"].items())
         lines.append(f"feet drift   {drift} (largest sole motion while in contact)")
+    if "mesh_self_collision" in summary:
+        from ..analysis.mesh_audit import audit_lines
+
+        audit = audit_lines(summary["mesh_self_collision"])
+        lines += [f"{'self-collision' if i == 0 else '':12s} {x}" for i, x in enumerate(audit)]
     st = summary.get("status", {})
     lines.append("ticks        " + ", ".join(f"{k} {v}" for k, v in st.items()))
     phases = summary.get("support_states")

@@ -14,8 +14,11 @@ slowly changing problem converges in a few iterations. Unlike ProxSuite, DAQP's 
 depend on memory alignment: the same QP gives the same solution to the last bit, in any process
 (docs/reliability.md), which makes runs repeatable.
 
-Infinite bounds become :math:`\pm 10^{30}`. An infeasible QP, the iteration limit or a cycling
-active set is reported as a failed solve (``success=False``), never an exception.
+Infinite bounds become :math:`\pm 10^{30}`; rows with no finite side this tick (an inactive
+collision pair) are not passed at all (DAQP tests every row at every iteration: with 381 pairs that
+was most of the solve), their multipliers kept at zero for the next hot start. An infeasible QP,
+the iteration limit or a cycling active set is reported as a failed solve (``success=False``),
+never an exception.
 """
 
 from __future__ import annotations
@@ -99,48 +102,61 @@ class DaqpSolver(QPSolver):
         return {**self.settings, "warm_start": self.warm_start}
 
     def _allocate(self, n: int, m: int) -> None:
-        self._A = np.zeros((m, n))
-        self._bu = np.empty(n + m)
-        self._bl = np.empty(n + m)
-        self._sense = np.zeros(n + m, dtype=np.int32)
         self._shape, self._lam = (n, m), None
 
-    def _fill(self, p: QPProblem) -> np.ndarray:
+    def _fill(
+        self, p: QPProblem
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """DAQP's ``A, bu, bl, sense`` and the indices of the rows passed.
+
+        Rows with no finite side are left out (DAQP would test them at every iteration).
+        """
         n = p.n
-        np.copyto(self._A, p.C)
-        np.minimum(p.ub, BIG, out=self._bu[:n])
-        np.maximum(p.lb, -BIG, out=self._bl[:n])
-        np.minimum(p.u, BIG, out=self._bu[n:])
-        np.maximum(p.l, -BIG, out=self._bl[n:])
-        eq = self._bl == self._bu
-        sense = self._sense
-        sense.fill(0)
-        if self.warm_start and self._lam is not None:
-            sense[self._lam != 0.0] = 1  # hot start: last tick's active set
-        sense[eq] = 5
-        return eq
+        rows = np.flatnonzero(np.isfinite(p.l) | np.isfinite(p.u))
+        if rows.size == p.n_in:
+            A = p.C
+            lo, hi = p.l, p.u
+        else:
+            A = p.C[rows]
+            lo, hi = p.l[rows], p.u[rows]
+        m = rows.size
+        bu, bl = np.empty(n + m), np.empty(n + m)
+        np.minimum(p.ub, BIG, out=bu[:n])
+        np.maximum(p.lb, -BIG, out=bl[:n])
+        np.minimum(hi, BIG, out=bu[n:])
+        np.maximum(lo, -BIG, out=bl[n:])
+        sense = np.zeros(n + m, dtype=np.int32)
+        lam = self._lam
+        if self.warm_start and lam is not None:  # hot start: last tick's active set
+            sense[:n][lam[:n] != 0.0] = 1
+            sense[n:][lam[n:][rows] != 0.0] = 1
+        sense[bl == bu] = 5
+        return np.ascontiguousarray(A, dtype=float), bu, bl, sense, rows
 
     def solve(self, problem: QPProblem) -> QPSolution:
         t0 = time.perf_counter()
         if self._shape != (problem.n, problem.n_in):
             self._allocate(problem.n, problem.n_in)
-        self._fill(problem)
+        A, bu, bl, sense, rows = self._fill(problem)
         H = np.ascontiguousarray(problem.H, dtype=float)
         g = np.ascontiguousarray(problem.g, dtype=float)
-        x, _, flag, info = self._daqp.solve(
-            H, g, self._A, self._bu, self._bl, self._sense, **self.settings
-        )
+        x, _, flag, info = self._daqp.solve(H, g, A, bu, bl, sense, **self.settings)
         if flag == -5 and self.settings["eps_prox"] == 0.0:
             # A singular H (a strategy's level without damping): DAQP's proximal-point
             # iterations solve it exactly; only this solve pays for them.
             settings = {**self.settings, "eps_prox": 1e-6}
-            x, _, flag, info = self._daqp.solve(
-                H, g, self._A, self._bu, self._bl, self._sense, **settings
-            )
+            x, _, flag, info = self._daqp.solve(H, g, A, bu, bl, sense, **settings)
         ok = flag in (1, 2)
         xs = np.array(x, dtype=float) if ok else None
         if xs is not None and not np.all(np.isfinite(xs)):
             xs, ok = None, False
-        self._lam = np.array(info["lam"], dtype=float) if ok else None
+        if ok:  # multipliers of every bound and row (zero for the rows left out)
+            lam = np.asarray(info["lam"], dtype=float)
+            full = np.zeros(problem.n + problem.n_in)
+            full[: problem.n] = lam[: problem.n]
+            full[problem.n + rows] = lam[problem.n :]
+            self._lam = full
+        else:
+            self._lam = None
         status = EXITFLAGS.get(int(flag), f"DAQP_{int(flag)}")
         return QPSolution(xs, ok, status, int(info["iterations"]), time.perf_counter() - t0)

@@ -8,41 +8,96 @@ r"""Task augmentation (Dariush 2009 4.3.1): every task in one weighted least-squ
 assembled with one matrix product, :math:`H = \bar J^\top \bar J + \lambda^2 W`,
 :math:`g = -\bar J^\top \bar r`, where :math:`\bar J` stacks :math:`\sqrt{w_i} J_i` and
 :math:`\bar r` stacks :math:`\sqrt{w_i} v^*_i`.
+
+Soft rows (``constraints/base.py``): the variable becomes :math:`x = (v, s)`, one slack per row
+of each soft constraint, with the exact penalty :math:`w\,s + \tfrac{\epsilon}{2} s^2`
+(:math:`\epsilon` = :attr:`Augmentation.SLACK_CURVATURE`, which keeps :math:`H` positive
+definite for the dual active-set solver) and the row :math:`C_i v - s_i \le u_i` (or
+:math:`C_i v + s_i \ge l_i` for a row bounded from below only); the slack of a row with no
+finite side this tick needs none: slacks live in a few *slots* given each tick to the soft rows
+in play (a collision pair within its influence distance, the polygon's edges), so 381
+self-collision pairs do not make the QP 381 variables larger. The hard set left (contacts, the
+viable box) always has a solution from a state the controller produced, so the QP does too.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
 from ..problem import QPProblem
 from ..robot import RobotModel
-from .base import STRATEGIES, Strategy, StrategyResult, TickProblem, solution_to_result
+from ..solvers import QPSolver
+from .base import STRATEGIES, SoftRows, Strategy, StrategyResult, TickProblem, solution_to_result
 
 
 @STRATEGIES.register("augmentation")
 class Augmentation(Strategy):
     """One weighted QP for all tasks; ``level`` is ignored."""
 
-    def __init__(self) -> None:
-        self._problem: QPProblem | None = None
+    #: :math:`\epsilon` of the slacks' quadratic term [cost per (row unit)^2]: small against
+    #: the penalty weights (>= 1e5), so a slack is zero whenever its row can hold.
+    SLACK_CURVATURE = 1.0
+    #: Slacks below this are not reported (row units; the solver's primal tolerance is 1e-9).
+    REPORT_TOLERANCE = 1e-7
+    #: Slack slots allocated first (the QP grows, once, when more soft rows are in play).
+    INITIAL_SLOTS = 16
 
-    def bind(self, robot: RobotModel, task_dims, n_rows, solver_factory) -> None:  # noqa: ANN001
+    def __init__(self) -> None:
+        self._problem = QPProblem(0, 0)
+        self._soft: list[SoftRows] = []
+        self._soft_idx = np.zeros(0, dtype=int)
+
+    def bind(
+        self,
+        robot: RobotModel,
+        task_dims: list[tuple[str, int, int]],
+        n_rows: int,
+        solver_factory: Any,
+    ) -> None:
         super().bind(robot, task_dims, n_rows, solver_factory)
         m = sum(d for _, d, _ in task_dims)
         self._Jw = np.zeros((m, robot.nv))
         self._rw = np.zeros(m)
         self._problem = QPProblem(robot.nv, n_rows)
-        self._solver = solver_factory()
-        self._sqrt_cache = [(None, None)] * len(task_dims)
-        self._w_seen: list = []
-        self._W_seen = None
+        self._solver: QPSolver = solver_factory()
+        self._sqrt_cache: list[tuple[Any, Any]] = [(None, None)] * len(task_dims)
+        self._w_seen: list[Any] = []
+        self._W_seen: np.ndarray | None = None
         self._W_is_eye = False
         self._sw_all = np.zeros(m)
+
+    def set_soft_rows(self, soft: list[SoftRows]) -> bool:
+        """Slack slots for the rows of the soft constraints (module docstring)."""
+        self._soft = list(soft)
+        idx = [np.arange(g.rows.start, g.rows.stop) for g in soft]
+        self._soft_idx = np.concatenate(idx) if idx else np.zeros(0, dtype=int)
+        w = [np.full(g.rows.stop - g.rows.start, g.weight) for g in soft]
+        self._soft_w = np.concatenate(w) if w else np.zeros(0)
+        group = [np.full(g.rows.stop - g.rows.start, k) for k, g in enumerate(soft)]
+        self._soft_group = np.concatenate(group) if group else np.zeros(0, dtype=int)
+        self._slot_rows = np.zeros(0, dtype=int)  # stacked row of each used slot, last tick
+        self._slot_group = np.zeros(0, dtype=int)
+        self._Hv = np.zeros((self.nv, self.nv))
+        self._gv = np.zeros(self.nv)
+        self._allocate_slots(min(self._soft_idx.size, self.INITIAL_SLOTS))
+        return True
+
+    def _allocate_slots(self, k: int) -> None:
+        """A QP with ``k`` slack slots (only when more soft rows are in play than slots)."""
+        nv = self.nv
+        self._n_slots = k
+        p = self._problem = QPProblem(nv + k, self.n_rows)
+        p.H[nv:, nv:] = self.SLACK_CURVATURE * np.eye(k)
+        p.lb[nv:] = 0.0
+        p.ub[nv:] = 0.0
+        self._slot_rows = self._slot_rows[:0]
 
     def reset(self) -> None:
         self._solver.reset()
 
-    def solvers(self):  # noqa: ANN201
+    def solvers(self) -> list[QPSolver]:
         return [self._solver]
 
     def assemble(self, tp: TickProblem) -> QPProblem:
@@ -53,6 +108,7 @@ class Augmentation(Strategy):
         if (
             J_all is not None
             and J_all.shape == Jw.shape
+            and v_all is not None
             and all(b.J.base is J_all and b.v_star.base is v_all for b in blocks)
         ):
             # Fast path: all rows already stacked; weight them with two products.
@@ -63,8 +119,8 @@ class Augmentation(Strategy):
                 self._sw_all = np.sqrt(np.concatenate(weights))
                 self._w_seen = weights
             sw = self._sw_all
-            np.multiply(tp.J_all, sw[:, None], out=Jw)
-            np.multiply(tp.v_all, sw, out=rw)
+            np.multiply(J_all, sw[:, None], out=Jw)
+            np.multiply(v_all, sw, out=rw)
         else:
             i = 0
             cache = self._sqrt_cache
@@ -77,7 +133,10 @@ class Augmentation(Strategy):
                 np.multiply(b.J, sw[:, None], out=Jw[i : i + k])
                 np.multiply(b.v_star, sw, out=rw[i : i + k])
                 i += k
-        np.matmul(Jw.T, Jw, out=p.H)
+        ns = self._soft_idx.size
+        nv = self.nv
+        H = self._Hv if ns else p.H
+        np.matmul(Jw.T, Jw, out=H)
         lam2 = tp.damping * tp.damping
         if lam2 > 0:
             W = tp.W
@@ -86,18 +145,62 @@ class Augmentation(Strategy):
                 self._W_seen = W
                 self._W_is_eye = not W.flags.writeable and np.array_equal(W, np.eye(len(W)))
             if self._W_is_eye:
-                p.H.flat[:: p.n + 1] += lam2
+                H.flat[:: nv + 1] += lam2
             else:
-                p.H += lam2 * W
-        np.matmul(Jw.T, rw, out=p.g)
-        np.negative(p.g, out=p.g)
-        if p.n_in:
-            p.C[...] = tp.C
-            p.l[...] = tp.l
-            p.u[...] = tp.u
-        p.lb[...] = tp.lb
-        p.ub[...] = tp.ub
+                H += lam2 * W
+        if not ns:
+            np.matmul(Jw.T, rw, out=p.g)
+            np.negative(p.g, out=p.g)
+            if p.n_in:
+                p.C[...] = tp.C
+                p.l[...] = tp.l
+                p.u[...] = tp.u
+            p.lb[...] = tp.lb
+            p.ub[...] = tp.ub
+            return p
+        # Soft rows in play this tick (a finite side): one slack slot each, in row order, so a
+        # slack keeps its slot (and the solver its hot start) while the set does not change.
+        idx = self._soft_idx
+        up = np.isfinite(tp.u[idx])
+        lo = np.isfinite(tp.l[idx]) & ~up
+        play = up | lo
+        k = int(play.sum())
+        if k > self._n_slots:
+            self._allocate_slots(min(idx.size, max(2 * self._n_slots, k)))
+            p = self._problem
+        rows = idx[play]
+        slots = nv + np.arange(k)
+        p.C[self._slot_rows, nv + np.arange(self._slot_rows.size)] = 0.0
+        p.C[:, :nv] = tp.C
+        p.C[rows, slots] = np.where(up[play], -1.0, 1.0)  # relax the finite side (upper first)
+        p.H[:nv, :nv] = H
+        np.matmul(Jw.T, rw, out=self._gv)
+        np.negative(self._gv, out=p.g[:nv])
+        p.g[nv:] = 0.0
+        p.g[slots] = self._soft_w[play]
+        p.ub[nv:] = 0.0  # unused slots are fixed at zero
+        p.ub[slots] = np.inf
+        p.l[...] = tp.l
+        p.u[...] = tp.u
+        p.lb[:nv] = tp.lb
+        p.ub[:nv] = tp.ub
+        self._slot_rows = rows
+        self._slot_group = self._soft_group[play]
         return p
 
+    def _slacks(self, x: np.ndarray) -> dict[str, float]:
+        """Soft constraint name -> its largest slack, for the ones that gave (row units)."""
+        k = self._slot_rows.size
+        s = x[self.nv : self.nv + k]
+        out: dict[str, float] = {}
+        for j in np.flatnonzero(s > self.REPORT_TOLERANCE):
+            name = self._soft[self._slot_group[j]].name
+            out[name] = max(out.get(name, 0.0), float(s[j]))
+        return out
+
     def solve(self, tp: TickProblem) -> StrategyResult:
-        return solution_to_result(self._solver.solve(self.assemble(tp)))
+        res = solution_to_result(self._solver.solve(self.assemble(tp)))
+        if self._soft_idx.size and res.x is not None:
+            res.slack = self._slacks(res.x)
+            res.x = res.x[: self.nv].copy()
+        return res

@@ -66,6 +66,8 @@ class StrategyResult:
         iterations: total solver iterations.
         solve_time: total solver time [s].
         levels: per-level details (hierarchy).
+        slack: soft constraint name -> largest slack of its rows (row units), for the
+            constraints that gave this tick (see :meth:`Strategy.set_soft_rows`).
     """
 
     x: np.ndarray | None
@@ -74,6 +76,22 @@ class StrategyResult:
     iterations: int = 0
     solve_time: float = 0.0
     levels: list[dict[str, Any]] = field(default_factory=list)
+    slack: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class SoftRows:
+    """The rows of one soft constraint in the stacked ``C, l, u`` (``constraints/base.py``).
+
+    Attributes:
+        name: constraint name.
+        rows: its slice of the stacked rows.
+        weight: exact-penalty weight per unit of slack.
+    """
+
+    name: str
+    rows: slice
+    weight: float
 
 
 class Strategy(abc.ABC):
@@ -98,6 +116,15 @@ class Strategy(abc.ABC):
         self.task_dims = task_dims
         self.n_rows = n_rows
         self.solver_factory = solver_factory
+
+    def set_soft_rows(self, soft: list[SoftRows]) -> bool:
+        """Give the rows of the soft constraints exact-penalty slacks (called once after bind).
+
+        Returns:
+            ``True`` when the strategy handles them; the default keeps every row hard (``False``)
+            and an infeasible tick goes to the relaxation fallback.
+        """
+        return False
 
     @abc.abstractmethod
     def solve(self, tp: TickProblem) -> StrategyResult:

@@ -70,3 +70,20 @@ def test_talos_srdf_disables_its_listed_pairs():
     assert sel.reasons().get("disabled by the SRDF", 0) > 100
     for a, b in sel.pairs:
         assert (min(a, b), max(a, b)) not in disabled
+
+
+def test_common_ancestor_coordinates_leave_a_pair_unbounded(g1):
+    """The trust region bounds only the coordinates of the two branches (base, waist excluded)."""
+    import numpy as np
+
+    from qpretarget.collision import CollisionModel
+
+    robot, _ = g1
+    cm = CollisionModel(robot, [("left_elbow_link", "left_wrist_yaw_link")])
+    lever = cm.pair_levers(np.array([0]))[0]
+    names = robot.joint_names
+    v = robot.joint_v_index
+    assert np.all(lever[:6] == 0.0)  # free flyer
+    assert lever[v[names.index("waist_yaw_joint")]] == 0.0
+    assert lever[v[names.index("left_shoulder_pitch_joint")]] == 0.0
+    assert lever[v[names.index("left_wrist_pitch_joint")]] > 0.0

@@ -176,13 +176,18 @@ def test_auto_pairs_are_reproducible_and_not_touching(robot_name, g1):
     d = CollisionModel(robot, a.pairs, broad_phase=False).compute_all(RobotState(robot))[0]
     assert d.min() >= a.touch_distance - 1e-6
     # No kept pair is pushed apart at rest: safety distances never exceed rest distances
-    # (pairs closer than d_s keep half their rest gap).
+    # (pairs close at rest get min(d_s, rest_fraction x rest)).
     assert np.all(a.safety <= d + 1e-6) and a.safety.min() > 0
+    np.testing.assert_allclose(a.safety, np.minimum(0.02, 0.25 * d), atol=1e-6)
     reasons = " ".join(a.left_out)
     assert "adjacent" in reasons
     lines = a.describe()
     assert any(line.startswith("left out:") for line in lines)
-    assert sum(line.startswith("  keep ") for line in lines) == len(a.pairs)
+    assert lines[0].startswith(f"{len(a.pairs)} pairs (auto")
+    full = a.describe(full=True)  # `qpretarget info CONFIG --pairs`: every pair, every reason
+    assert sum(line.startswith("  keep ") for line in full) == len(a.pairs)
+    n_out = sum(len(v) for v in a.left_out.values())
+    assert sum(line.startswith("  ") and " / " in line for line in full) == len(a.pairs) + n_out
     shapes = a.model.shapes
     joints = {n: s.joint for n, s in zip(a.model.bodies, shapes, strict=True)}
     parents = robot.model.parents
@@ -191,7 +196,7 @@ def test_auto_pairs_are_reproducible_and_not_touching(robot_name, g1):
         assert parents[joints[y]] != joints[x]
     if robot_name == "talos":  # Talos has an SRDF with disabled pairs
         assert any("SRDF" in r for r in a.left_out)
-    assert a.n_rows == min(len(a.pairs), 24)
+    assert a.n_rows == min(len(a.pairs), 12)
 
 
 def test_recovery_from_inside_a_pair(g1, meter):
@@ -232,3 +237,39 @@ def test_bad_configurations_are_reported(g1):
     con = SelfCollision(pairs=[["left_wrist_yaw_link", "torso_lnk"]])
     with pytest.raises(UnknownNameError, match="torso_link"):
         con.bind(g1, path="constraints[3]")
+
+
+def test_robot_without_collision_geometry_needs_optional(repo_dir):
+    """A clear refusal, or (``optional: true``) a run without the constraint and a warning."""
+    base = {
+        "robot": {"urdf": str(repo_dir / "configs" / "robots" / "planar_3dof.urdf"),
+                  "free_flyer": False},
+        "dt": 0.01,
+        "tasks": [{"type": "posture", "name": "posture", "weight": 1.0}],
+    }  # fmt: skip
+    with pytest.raises(ConfigError, match="no collision geometry.*optional: true"):
+        Controller({**base, "constraints": [{"type": "self_collision"}]})
+    with pytest.warns(UserWarning, match="self_collision is off"):
+        ctrl = Controller({**base, "constraints": [{"type": "self_collision", "optional": True}]})
+    con = ctrl.constraint("self_collision")
+    assert con.disabled and con.n_rows == 0 and con.pairs == []
+    assert ctrl.step().status == "ok"
+    assert any("disabled (optional: true)" in line for line in con.describe())
+
+
+def test_include_and_exclude_name_unknown_bodies_with_close_names(g1):
+    con = SelfCollision(pairs="auto", include=[["left_hip_rol_link", "pelvis_contour_link"]])
+    with pytest.raises(UnknownNameError, match="left_hip_roll_link"):
+        con.bind(g1, path="constraints[2]")
+    with pytest.raises(ConfigError, match="include"):
+        SelfCollision(pairs=PAIRS, include=[["left_hip_roll_link", "pelvis_contour_link"]])
+
+
+def test_auto_rows_keep_their_slot(g1):
+    """Capped rows: a pair keeps its QP row while it stays among the closest (warm start)."""
+    con = SelfCollision(pairs="auto", max_rows=4)
+    con.bind(g1)
+    first = con._slots(np.array([3, 7, 9]))
+    again = con._slots(np.array([3, 9, 11]))  # 7 leaves, 11 arrives and takes 7's row
+    assert first.tolist() == [0, 1, 2] and again.tolist() == [0, 2, 1]
+    assert con._slots(np.array([11, 20, 30, 40])).tolist() == [1, 0, 2, 3]
