@@ -7,6 +7,7 @@ a 2-second pause."""
 from __future__ import annotations
 
 import json
+import select
 import signal
 import subprocess
 import sys
@@ -24,17 +25,26 @@ from qpretarget.sources import mvn
 CAPTURE = 120.0
 
 
-def run_pair(tmp_path: Path, config: Path, clip: Path, stream_args: list[str]) -> dict:
-    """Start `live` on a free port, stream the clip to it, stop `live` with Ctrl-C (SIGINT)."""
+def run_pair(
+    tmp_path: Path, config: Path, clip: Path, stream_args: list[str], max_wait_ms: int = 100
+) -> dict:
+    """Start `live` on a free port, stream the clip to it, stop `live` with Ctrl-C (SIGINT).
+
+    ``--max-lag`` is large so that a stalled test machine never skips a backlog (the counts and
+    the comparison stay deterministic); ``max_wait_ms`` is how late the sender may be before a
+    frame is extrapolated.
+    """
     record = tmp_path / "live.npz"
     live = subprocess.Popen(
         [sys.executable, "-m", "qpretarget", "live", str(config), "--source", "xsens:0",
-         "--capture-rate", str(CAPTURE), "--max-wait", "100", "--max-lag", "10000",
+         "--capture-rate", str(CAPTURE), "--max-wait", str(max_wait_ms), "--max-lag", "10000",
          "--record", str(record),
          "--json", "--quiet"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
+        ready, _, _ = select.select([live.stderr], [], [], 120.0)
+        assert ready, "qpretarget live did not start within 120 s"
         line = live.stderr.readline()  # printed once the socket is bound
         assert "listening" in line, line + live.stderr.read()
         port = int(line.split("udp://127.0.0.1:")[1].split()[0])
@@ -69,7 +79,7 @@ def offline_reference(config: Path, frames: np.ndarray, rotations: np.ndarray) -
 def test_live_equals_offline_causal_run(tmp_path: Path, configs_dir: Path, mocap_dir: Path):
     config = configs_dir / "g1_whole_body.yaml"
     clip = mocap_dir / "cmu_131_04_dance_spin.bvh"
-    run = run_pair(tmp_path, config, clip, ["--end", "2.5"])
+    run = run_pair(tmp_path, config, clip, ["--end", "2.5"], max_wait_ms=500)
     rep = run["report"]
     assert rep["source"]["malformed"] == 0
     # The frames that arrived are the clip's segments through float32, bit for bit.
