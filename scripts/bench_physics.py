@@ -6,6 +6,11 @@
 Retargets each clip with CONFIG (optionally with the start ramp lengthened to --ramp seconds),
 replays it unassisted and assisted, prints one Markdown row per clip and the wall time of the
 replays (median, p95, p99 of the per-clip real-time factors).
+
+    python scripts/bench_physics.py --stance g1 talos
+
+holds each robot's reference posture for 2 s with every gain profile that applies to it (the
+docs' quiet-stance table).
 """
 
 from __future__ import annotations
@@ -36,15 +41,58 @@ def _config(path: Path, ramp: float | None, tmp: Path) -> Path:
     return p
 
 
+def stance(robots: list[str], feedforward: str) -> None:
+    """Quiet stance: each robot's reference posture held for 2 s, per gain profile."""
+    from qpretarget.physics.gains import GAIN_PROFILES
+    from qpretarget.physics.model import build_physics_model
+    from qpretarget.physics.replay import check_run
+    from qpretarget.robot import RobotModel
+    from qpretarget.trajectory import RobotTrajectory
+
+    print("| robot | gains | verdict | base error p95 | joint RMS | feet share |")
+    print("|---|---|---|---|---|---|")
+    for name in robots:
+        robot = RobotModel.from_name(name)
+        T = 200
+        traj = RobotTrajectory(
+            t=np.arange(T) * 0.01,
+            q=np.tile(robot.q_reference, (T, 1)),
+            v=np.zeros((T, robot.nv)),
+            joint_names=list(robot.joint_names),
+            robot=name,
+            config_yaml=f"robot: {name}\n",
+        )
+        for g, prof in GAIN_PROFILES.items():
+            if prof.robots and name not in prof.robots:
+                continue
+            pm = build_physics_model(robot, gains=g)
+            m, _, _ = check_run(traj, pm=pm, assisted=False, feedforward=feedforward)
+            u = m["unassisted"]
+            fell = u["fallen_at_s"]
+            verdict = m["verdict"] if fell is None else f"falls at {fell:.2f} s"
+            print(
+                f"| {name} | `{g}` | {verdict} | {u['root_position_error_mm']['p95']:.1f} mm | "
+                f"{u['joint_tracking_rms_deg']['overall']:.2f} deg | "
+                f"{u['feet']['weight_share_mean'] * 100:.0f} % |"
+            )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("config")
-    ap.add_argument("clips", nargs="+")
+    ap.add_argument("config", nargs="?")
+    ap.add_argument("clips", nargs="*")
+    ap.add_argument("--stance", nargs="+", metavar="ROBOT", help="quiet-stance table instead")
+    ap.add_argument("--feedforward", default="gravity", help="gravity (default) or none")
     ap.add_argument("--ramp", type=float, default=None, help="calibration ramp_time [s]")
     ap.add_argument("--gains", default=None)
     ap.add_argument("--end", type=float, default=None, help="clip end [s]")
     ap.add_argument("--out", default=None, help="JSON with every clip's metrics")
     args = ap.parse_args()
+    if args.stance:
+        stance(args.stance, args.feedforward)
+        return
+    if not args.config or not args.clips:
+        ap.error("give CONFIG and clips, or --stance ROBOT...")
 
     from qpretarget.control.controller import Controller
     from qpretarget.motion import load_motion
@@ -70,7 +118,7 @@ def main() -> None:
             motion = motion.slice(0.0, args.end) if hasattr(motion, "slice") else motion
         run = Retargeter(controller).retarget(motion, progress=False)
         t0 = time.perf_counter()
-        m, free, helped = check_run(run, pm=pm)
+        m, free, helped = check_run(run, pm=pm, feedforward=args.feedforward)
         wall = time.perf_counter() - t0
         r = summary_row(m)
         dur = float(run.t[-1] - run.t[0])
