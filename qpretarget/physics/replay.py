@@ -4,18 +4,20 @@
 Each physics step (``h`` = the model's time step, a whole number of steps per run frame) every
 actuated joint gets
 
-    tau = clip(kp (q_ref - q) + kd (qdot_ref - qdot), -tau_max, tau_max)        (1)
+    tau = clip(kp (q_ref - q) + kd (qdot_ref - qdot) + tau_ff, -tau_max, tau_max)        (1)
 
-with ``q_ref`` linear between the run's frames and ``qdot_ref`` the run's joint velocity ``v``
-(the velocity the controller applied over the frame: the feed-forward). Nothing else acts: no
-balance controller, no gravity compensation. The floating base is free, so the robot stands,
-stumbles or falls on its own.
+with ``q_ref`` linear between the run's frames, ``qdot_ref`` the run's joint velocity ``v`` (the
+velocity the controller applied over the frame: the velocity feed-forward) and ``tau_ff`` the
+gravity feed-forward of :func:`gravity_feedforward` (static torques holding the reference posture
+on its stance feet; ``feedforward="none"`` drops it). Nothing else acts: no balance controller, no
+feedback on the base. The floating base is free, so the robot stands, stumbles or falls on its
+own.
 
 The *assisted* replay adds a virtual wrench on the floating base that pulls it toward the
 reference base pose: a MuJoCo weld equality between the base and a mocap body moved along the
 reference, a soft constraint (``solref = (0.1 s, 1)``, ``solimp`` impedance 0.1) that the
 constraint solver integrates implicitly; soft, so the feet carry the weight when they can (on a
-clip that stands unassisted the weld still takes about 10 % of the weight at p95, mostly
+clip that stands unassisted the weld still takes about 7 % of the weight at p95, mostly
 horizontal, pulling the swaying base back: that is the floor of this measure). Its constraint force
 ``(f, n)`` is the effort the robot's own feet could not provide
 (:mod:`~qpretarget.physics.metrics` reports ``|f|`` as % of body weight and ``|n|``).
