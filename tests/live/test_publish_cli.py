@@ -142,3 +142,12 @@ def test_realtime_priority_is_checked() -> None:
 
     with pytest.raises(ConfigError, match="1..99"):
         set_realtime(0)
+
+
+@pytest.mark.parametrize("command", ["live", "stream"])
+def test_help_has_examples(command: str, capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    assert "examples:" in text and f"qpretarget {command}" in text
