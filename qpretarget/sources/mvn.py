@@ -27,13 +27,15 @@ revision N, 2018), sections 2.3-2.5 and 3.1. What this module implements:
   the convention of :class:`~qpretarget.motion.HumanMotion`, so no axis change is needed.
   Items come in the order body segments, props, left then right finger segments (section 2.5.1).
 * **Units.** Section 2.5.6 of the specification says positions are in cm, while the MVN user
-  manual (MV0319P, "Network Streamer") and Xsens' support pages say the quaternion stream's
-  positions are in metres. MVN 2018 and later send metres; ``units="cm"`` reads an older sender.
+  manual (MV0319P, "Network Streamer") and Xsens' support article on the Network Streamer say the
+  quaternion stream's positions are in metres; the default follows the manual, ``units="cm"``
+  reads a sender in cm.
 * **Segments** (section 3.1, table 1): ID = index + 1, Pelvis 1 ... LeftToe 23 (:data:`SEGMENTS`).
   Each segment's position is its origin, the joint at its proximal end, and its orientation is the
-  segment frame in the world; all segment orientations are the identity in MVN's calibration
-  pose (T-/N-pose facing +x), i.e. they are rotations *relative to the rest pose*, as
-  ``HumanMotion.orientations`` are.
+  segment frame in the world. MVN's null pose is a T-pose "where all segment orientations are set
+  to identity" (section 2.6.2): the orientations are rotations *relative to the rest pose*, as
+  ``HumanMotion.orientations`` are. Type 02 is Z-up by default ("Default mode Z-Up, right-handed or
+  Y-Up"); MVN's streamer must be left on Z-up.
 
 Decoded frames name each segment after the joint at its origin in MVN's own BVH export
 (:data:`SEGMENT_JOINTS`: Pelvis -> ``Hips``, RightUpperArm -> ``RightShoulder``...), so the bundled
