@@ -188,37 +188,27 @@ def gravity_feedforward(
 ) -> np.ndarray:
     """Joint torques that hold each reference posture still on its stance feet (T, n) [N m].
 
-    Static equilibrium of the floating base (pinocchio): with ``g(q)`` the generalized gravity
-    and ``J_c`` the 6-D Jacobians of the stance soles (local frames), the contact wrenches are
-    the least-norm solution of the base rows ``J_c,base' f = g_base``, and the joint torques
+    Static equilibrium of the floating base (pinocchio): the generalized gravity ``g(q)`` (RNEA
+    at zero velocity and acceleration) with the base's wrench carried by the stance soles,
+    least-norm, by :func:`~qpretarget.analysis.measures.carry_base_wrench` (the same definition
+    ``qpretarget evaluate`` uses for its torques): ``J_c,base' f = g_base``,
     ``tau = g_joints - J_c,joints' f``. Without a stance foot: ``tau = g_joints`` (limbs held
     against gravity relative to the base). The PD of eq. 1 then only corrects errors, so a servo
     does not sag by ``tau / kp`` (which, at the ankles, moves the CoM toward the toes).
     """
     import pinocchio as pin
 
+    from ..analysis.measures import carry_base_wrench
+
     robot = pm.robot
-    model, data = robot.model, robot.data
-    T, n = joints.shape
-    q_idx, v_idx = robot.joint_q_index, robot.joint_v_index
-    fids = [robot.frame_id(f.frame) for f in robot.feet.values()]
-    out = np.zeros((T, n))
-    q = np.array(robot.q_reference, dtype=float)
-    for k in range(T):
-        q[:7] = root[k]
-        q[q_idx] = joints[k]
-        g = pin.computeGeneralizedGravity(model, data, q)
-        feet = [fids[i] for i in np.nonzero(stance[k])[0]] if len(fids) else []
-        if feet:
-            pin.computeJointJacobians(model, data, q)
-            pin.updateFramePlacements(model, data)
-            J = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL) for f in feet])
-            f_c = np.linalg.lstsq(J[:, :6].T, g[:6], rcond=None)[0]
-            tau = g - J.T @ f_c
-        else:
-            tau = g
-        out[k] = tau[v_idx]
-    return out
+    T = len(joints)
+    q = np.tile(np.asarray(robot.q_reference, dtype=float), (T, 1))
+    q[:, :7] = root
+    q[:, robot.joint_q_index] = joints
+    g = np.array([pin.computeGeneralizedGravity(robot.model, robot.data, qk) for qk in q])
+    foot_ids = [robot.frame_id(f.frame) for f in robot.feet.values()]
+    tau = carry_base_wrench(robot, q, g, stance, foot_ids)
+    return tau[:, robot.joint_v_index - robot.root_nv]
 
 
 def _floor_height(pm: PhysicsModel, d: Any, mujoco: Any) -> float:
