@@ -190,3 +190,48 @@ def test_a_backlog_older_than_max_lag_is_skipped() -> None:
     assert len(rec.pushed) == 6  # straight to the newest, blending into it
     x = pushed_x(rec)
     assert x[4] < x[5] < pose(19)[0][0, 0]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_random_network_keeps_the_input_regular(seed: int) -> None:
+    """Drops, duplicates, swaps, jitter, a sender clock 0.05 % slow and two pauses: every pushed
+    frame sits on the regular input clock, no sample is pushed twice, the counts add up."""
+    rng = np.random.default_rng(seed)
+    s, rec = session()
+    events: list[tuple[float, int]] = []
+    pauses = [(rng.uniform(0.5, 1.0), 0.3), (rng.uniform(1.5, 2.0), 1.0)]
+    for k in range(400):
+        t = k * P * 1.0005 + rng.uniform(0, 0.008)  # jitter under max_wait (25 ms)
+        if any(a <= k * P < a + d for a, d in pauses) or rng.random() < 0.05:
+            continue
+        events.append((t, k))
+        if rng.random() < 0.03:
+            events.append((t + 0.001, k))
+    for i in range(len(events) - 1):
+        if rng.random() < 0.05:
+            events[i], events[i + 1] = (
+                (events[i][0], events[i + 1][1]),
+                (events[i + 1][0], events[i][1]),
+            )
+    now, i = 0.0, 0
+    while now < 4.5:
+        now += 0.001
+        batch = []
+        while i < len(events) and events[i][0] <= now:
+            batch.append(frame(events[i][1], events[i][0]))
+            i += 1
+        s.feed(batch)
+        s.advance(now)
+    c = s.counts
+    times = np.array([p[0] for p in rec.pushed])
+    np.testing.assert_array_equal(times, np.arange(len(times)) / RATE)
+    kinds = s.arrays()["frame_kind"]
+    seqs = s.arrays()["frame_seq"]
+    real = seqs[seqs >= 0]
+    assert len(np.unique(real)) == len(real)  # no sample pushed twice
+    assert c["pushed"] == len(rec.pushed) == len(kinds)
+    assert (kinds == "extrapolated").sum() == c["extrapolated"] >= 2  # one per pause at least
+    assert (kinds == "held").sum() == c["held_frames"] and c["resumes"] >= 2
+    assert (kinds == "interpolated").sum() <= c["lost"]
+    assert c["frames"] == len(events)
+    assert np.all(np.isfinite([p[1] for p in rec.pushed]))
