@@ -341,8 +341,12 @@ class LiveSession:
                 self._overtaken.add(seq)  # a later sample arrived first
             self._max_seen = seq if self._max_seen is None else max(self._max_seen, seq)
             self._buffer[seq] = f
-        if not self.started and self._buffer and self.source.rate is not None:
-            self._start()
+        if not self.started and self._buffer:
+            if self.source.rate is not None:
+                self._start()
+            elif len(self._buffer) > 1000:  # the rate cannot be measured: keep the newest
+                for seq in sorted(self._buffer)[:-1000]:
+                    del self._buffer[seq]
 
     def advance(self, now: float) -> None:
         """Push every frame that is due by ``now``: received ones, filled-in ones, held ones."""
@@ -538,6 +542,11 @@ class LiveSession:
         rate = (c["ticks"] - ticks_prev) / max(1e-9, now - t_prev)
         self._status_mark = (now, c["ticks"])
         wall = now - (self.t_open or now)
+        if not self.started and c["frames"]:
+            return (
+                f"{wall:6.1f} s | {c['frames']} frames received, waiting for the capture rate "
+                "(the time codes do not give it: pass --capture-rate)"
+            )
         return (
             f"{wall:6.1f} s | {rate:6.1f} ticks/s | latency p50 {lat['median_ms']:.2f} "
             f"p99 {lat['p99_ms']:.2f} ms | misses {c['deadline_misses']} | frames {c['frames']} "
