@@ -22,6 +22,10 @@ Over the frames simulated (the unassisted replay stops at the first fallen frame
   ``|n| / (m g)`` [mm] — how far the centre of pressure would have to move outside what the feet
   gave.
 
+Diagnostic (kinematic, from the run alone): ``reference_zmp`` — stance frames in which the
+reference's ZMP lies outside the stance soles (:mod:`~qpretarget.physics.zmp`), the first such
+time and whether it came before the fall.
+
 Verdict: ``falls`` (survived < 1), else ``saturates`` (more than :data:`SATURATION_FRAMES_MAX` of
 the frames saturated), else ``ok``.
 """
@@ -162,8 +166,29 @@ def verdict(block: dict[str, Any]) -> str:
     return "ok"
 
 
+def zmp_block(margin: np.ndarray, t: np.ndarray, fallen_at: int | None) -> dict[str, Any]:
+    """Reference ZMP summary: stance frames with the ZMP outside the soles, first such time."""
+    ok = np.isfinite(margin)
+    outside = ok & (margin < 0.0)
+    first = int(np.argmax(outside)) if outside.any() else None
+    return {
+        "stance_frames": int(ok.sum()),
+        "frames_outside": int(outside.sum()),
+        "first_outside_s": None if first is None else _f(t[first] - t[0]),
+        "min_margin_mm": _f(np.min(margin[ok]) * 1e3) if ok.any() else None,
+        "outside_before_fall": None
+        if fallen_at is None
+        else bool(first is not None and first <= fallen_at),
+    }
+
+
 def summarize(
-    free: Any, assisted: Any | None, pm: Any, *, per_frame: bool = False
+    free: Any,
+    assisted: Any | None,
+    pm: Any,
+    *,
+    per_frame: bool = False,
+    zmp_margin: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """The metrics of an unassisted replay and, optionally, an assisted one.
 
@@ -172,6 +197,9 @@ def summarize(
         assisted: the same run replayed with the virtual root wrench, or ``None``.
         pm: the :class:`~qpretarget.physics.model.PhysicsModel` (its assumptions are recorded).
         per_frame: add the per-frame series (lists, ``null`` where not simulated).
+        zmp_margin: the reference ZMP's signed margin per frame
+            (:func:`~qpretarget.physics.zmp.reference_zmp_margin`), summarized as
+            ``reference_zmp`` (a kinematic diagnostic of the run, not simulated).
     """
     out: dict[str, Any] = {
         "thresholds": {
@@ -187,8 +215,14 @@ def summarize(
     out["verdict"] = verdict(out["unassisted"])
     if assisted is not None:
         out["assisted"] = _replay_block(assisted)
+    if zmp_margin is not None:
+        out["reference_zmp"] = zmp_block(np.asarray(zmp_margin, float), free.t, free.fallen_at)
     if per_frame:
         out["per_frame"] = per_frame_series(free, assisted)
+        if zmp_margin is not None:
+            out["per_frame"]["reference_zmp_margin_mm"] = [
+                _f(x * 1e3) for x in np.asarray(zmp_margin, float)
+            ]
     return out
 
 

@@ -496,11 +496,27 @@ def check_run(
         pm = build_physics_model(
             robot, gains=gains, timestep=timestep if timestep is not None else DEFAULT_TIMESTEP
         )
-    joint_columns(traj, pm)
+    cols = joint_columns(traj, pm)
     free = replay_run(traj, pm, assisted=False, progress=progress, feedforward=feedforward)
     helped = (
         replay_run(traj, pm, assisted=True, progress=progress, feedforward=feedforward)
         if assisted
         else None
     )
-    return summarize(free, helped, pm), free, helped
+    zmp_margin = None
+    if pm.robot is not None:
+        from .zmp import reference_zmp_margin
+
+        robot = pm.robot
+        T = len(traj.t)
+        q = np.tile(np.asarray(robot.q_reference, float), (T, 1))
+        q[:, :7] = np.asarray(traj.q)[:, :7]
+        q[:, robot.joint_q_index] = np.asarray(traj.q)[:, 7:][:, cols]
+        v = np.zeros((T, robot.nv))
+        if np.shape(traj.v) == (T, robot.nv):
+            v[:, :6] = np.asarray(traj.v)[:, :6]
+            v[:, robot.joint_v_index] = np.asarray(traj.v)[:, 6:][:, cols]
+        zmp_margin = reference_zmp_margin(
+            robot, np.asarray(traj.t, float), q, v, free.ref_contacts, free.floor_height
+        )[1]
+    return summarize(free, helped, pm, zmp_margin=zmp_margin), free, helped

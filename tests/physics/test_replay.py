@@ -40,6 +40,8 @@ def test_static_balance_run_survives_unassisted(checked):
     # The soft weld of the assisted replay takes little on a feasible clip (measured ~10 % BW p95).
     assert m["assisted"]["assist"]["force_bw_pct"]["p95"] < 20.0
     assert helped is not None and helped.fallen_at is None
+    # Dynamically balanced as retargeted: the reference ZMP never leaves the soles.
+    assert m["reference_zmp"]["frames_outside"] == 0
 
 
 def test_deterministic(run, g1_physics, checked):
@@ -77,9 +79,11 @@ def test_com_pushed_past_the_toes_falls(run, g1_physics):
     for j in ("left_hip_pitch_joint", "right_hip_pitch_joint"):
         q[:, 7 + run.joint_names.index(j)] -= 1.2 * ramp
     bent = dataclasses.replace(run, q=q, v=np.vstack([run.v[:1], np.zeros_like(run.v[1:])]))
-    m = summarize(replay_run(bent, pm), None, pm)
+    m = check_run(bent, pm=pm, assisted=False)[0]
     assert m["verdict"] == "falls"
     assert m["unassisted"]["survived_fraction"] < 1.0
+    # The run itself says why: its ZMP leaves the soles before the robot falls.
+    assert m["reference_zmp"]["outside_before_fall"] is True
 
 
 def test_step_discontinuity_saturates_or_falls(run, g1_physics):
