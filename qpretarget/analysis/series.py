@@ -237,52 +237,31 @@ def compute_series(
     kin = _kinematics_pass(robot, q, _task_points(controller, order), feet, contacts, collision)
     soles = dict(zip(foot_names, kin.soles, strict=True))
     slip, lift = _foot_slip(soles, contacts)
-
-    # Joint limits and motion peaks.
-    qi, vi = robot.joint_q_index, robot.joint_v_index
+    qi = robot.joint_q_index
     q_joints = q[:, qi]
-    q_min, q_max = robot.q_min[qi], robot.q_max[qi]
-    viol, amount = joint_limit_violations(q_joints, q_min, q_max, tolerance=joint_limit_tolerance)
+    viol, amount = joint_limit_violations(
+        q_joints, robot.q_min[qi], robot.q_max[qi], tolerance=joint_limit_tolerance
+    )
     idx, power, power_held, source = _power(traj, robot, t, q, contacts, [f[0] for f in feet])
-
-    reached = kin.reached
-    recorded = {k: np.asarray(v, float) for k, v in traj.actual.items() if k in reached}
     name = traj.meta.get("config_name") or getattr(controller, "config", {}).get("name") or ""
     return MetricSeries(
-        t=t,
-        joint_names=list(robot.joint_names),
-        q_joints=q_joints,
-        q_min=q_min,
-        q_max=q_max,
-        targets={k: np.asarray(traj.targets[k], float) for k in reached},
-        reached=reached,
-        recorded=recorded,
-        joint_violation=viol,
-        joint_violation_amount=amount,
+        t=t, joint_names=list(robot.joint_names), q_joints=q_joints,
+        q_min=robot.q_min[qi], q_max=robot.q_max[qi],
+        targets={k: np.asarray(traj.targets[k], float) for k in kin.reached},
+        reached=kin.reached,
+        recorded={k: np.asarray(v, float) for k, v in traj.actual.items() if k in kin.reached},
+        joint_violation=viol, joint_violation_amount=amount,
         pair_names=list(collision.pair_names) if collision is not None else [],
-        pair_distance=kin.pair_distance,
-        safety_distance=safety,
-        foot_names=foot_names,
-        contacts=contacts,
-        contacts_assumed=assumed,
-        com=kin.com,
-        com_margin=kin.com_margin,
-        support_polygons=kin.polygons,
-        sole_positions=soles,
-        foot_slip=slip,
-        foot_lift=lift,
-        power_index=idx,
-        power=power,
-        power_base_held=power_held,
-        power_source=source,
-        peaks=derivative_peaks(t, q_joints),
-        v_max=robot.v_max[vi],
+        pair_distance=kin.pair_distance, safety_distance=safety,
+        foot_names=foot_names, contacts=contacts, contacts_assumed=assumed,
+        com=kin.com, com_margin=kin.com_margin, support_polygons=kin.polygons,
+        sole_positions=soles, foot_slip=slip, foot_lift=lift,
+        power_index=idx, power=power, power_base_held=power_held, power_source=source,
+        peaks=derivative_peaks(t, q_joints), v_max=robot.v_max[robot.joint_v_index],
         solve_time=None if traj.solve_time is None else np.asarray(traj.solve_time, float),
         status=None if traj.status is None else np.asarray(traj.status).astype(str),
-        robot=robot.name,
-        config_name=str(name),
-        joint_limit_tolerance=joint_limit_tolerance,
-    )
+        robot=robot.name, config_name=str(name), joint_limit_tolerance=joint_limit_tolerance,
+    )  # fmt: skip
 
 
 def _run_contacts(
