@@ -66,12 +66,13 @@ def reference_zmp_margin(
         L[k] = data.hg.angular
     mass = float(pin.computeTotalMass(model))
     g = 9.81
+    acc = np.zeros((T, 3))
+    dL = np.zeros((T, 3))
     if T >= 3:
-        acc = np.gradient(np.gradient(com, t, axis=0), t, axis=0)
-        dL = np.gradient(L, t, axis=0)
-    else:
-        acc, dL = np.zeros((T, 3)), np.zeros((T, 3))
-    acc, dL = _smooth(acc, SMOOTH_FRAMES), _smooth(dL, SMOOTH_FRAMES)
+        acc = np.asarray(np.gradient(np.gradient(com, t, axis=0), t, axis=0), float)
+        dL = np.asarray(np.gradient(L, t, axis=0), float)
+    acc = _smooth(acc, SMOOTH_FRAMES)
+    dL = _smooth(dL, SMOOTH_FRAMES)
     gz = acc[:, 2] + g
     h = com[:, 2] - floor
     zmp = np.stack(
