@@ -287,9 +287,9 @@ def carry_base_wrench(
 
 def solve_time_stats(solve_time: npt.ArrayLike | None) -> dict[str, float | None]:
     """Median, p95, max and mean of per-tick solve times, in [ms]."""
-    if solve_time is None or len(solve_time) == 0:
+    s = np.zeros(0) if solve_time is None else np.asarray(solve_time, float).reshape(-1) * 1e3
+    if s.size == 0:
         return {"median_ms": None, "p95_ms": None, "max_ms": None, "mean_ms": None, "ticks": 0}
-    s = np.asarray(solve_time, float) * 1e3
     return {
         "median_ms": float(np.median(s)),
         "p95_ms": float(np.percentile(s, 95)),

@@ -81,7 +81,7 @@ class GeometryPairDistances:
                 if n not in by_name:
                     raise MetricsError(
                         f"collision body {n!r} matches no geometry object."
-                        f"{close_matches_hint(n, by_name)}"
+                        f"{close_matches_hint(n, list(by_name))}"
                     )
             group = []
             for i in by_name[a]:
