@@ -42,9 +42,10 @@ def bench(config: Path, solver: str | None, clip: Path, args: argparse.Namespace
     """One live run: returns the session report."""
     with open(config, encoding="utf-8") as f:
         cfg = load_yaml(f)
-    if solver is not None:
+    if solver is not None or args.solver_options:
         cfg = copy.deepcopy(cfg)
-        cfg["solver"] = {"name": solver}
+        name = solver or (cfg.get("solver") or {}).get("name", "daqp")
+        cfg["solver"] = {"name": name, **args.solver_options}
     ctrl = Controller(cfg, base_dir=config.parent)
     retargeter = Retargeter(ctrl, rate=args.rate)
     source = XsensSource(0, capture_rate=args.capture_rate)
@@ -75,7 +76,10 @@ def bench(config: Path, solver: str | None, clip: Path, args: argparse.Namespace
     )
     proc[0].wait(timeout=60)
     sink.close()
-    report["solver"] = solver or cfg.get("solver", {}).get("name", "default")
+    opts = ", ".join(f"{k}={v}" for k, v in args.solver_options.items())
+    report["solver"] = (solver or cfg.get("solver", {}).get("name", "default")) + (
+        f" ({opts})" if opts else ""
+    )
     return report
 
 
@@ -90,25 +94,40 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=None, help="control rate [Hz] (default 1/dt)")
     ap.add_argument("--seconds", type=float, default=None, help="excerpt length (default all)")
     ap.add_argument("--realtime", action="store_true", help="receive loop under SCHED_FIFO 50")
+    ap.add_argument(
+        "--solver-options",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="solver options, e.g. max_iter=50 (ProxSuite) or iter_limit=100 (daqp)",
+    )
     args = ap.parse_args()
+    args.solver_options = {
+        k: float(v) if "." in v else int(v)
+        for k, v in (o.split("=", 1) for o in args.solver_options)
+    }  # fmt: skip
     if args.realtime:
         set_realtime(50)
     info = machine_info()
     print(f"machine: {info.get('cpu', '?')}, {os.cpu_count()} cores, "
           f"load average {os.getloadavg()[0]:.2f} at start")  # fmt: skip
-    print("| clip | backend | ticks | median ms | p95 ms | p99 ms | max ms | deadline misses "
-          "| held ticks | controller step median / p99 ms |")  # fmt: skip
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print(
+        "| clip | backend | ticks | median ms | p95 ms | p99 ms | max ms | deadline misses "
+        "| held ticks | controller step median / p99 ms | relaxed / held by the controller |"
+    )
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name in args.clips:
         clip = Path(name) if Path(name).is_file() else MOCAP / name
         for solver in args.solvers:
             rep = bench(Path(args.config), solver, clip, args)
             lat, c, step = rep["latency"], rep["counts"], rep["controller_step"]
+            status = rep["controller_status"]
             print(
                 f"| {clip.stem} | {rep['solver']} | {c['ticks']} | {lat['median_ms']:.2f} | "
                 f"{lat['p95_ms']:.2f} | {lat['p99_ms']:.2f} | {lat['max_ms']:.2f} | "
                 f"{c['deadline_misses']} | {c['held_ticks']} | "
-                f"{step['median_ms']:.2f} / {step['p99_ms']:.2f} |",
+                f"{step['median_ms']:.2f} / {step['p99_ms']:.2f} | "
+                f"{status.get('relaxed', 0)} / {status.get('held', 0)} |",
                 flush=True,
             )
     print(f"load average {os.getloadavg()[0]:.2f} at the end")

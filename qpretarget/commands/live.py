@@ -125,7 +125,9 @@ def format_report(report: dict) -> str:
             f"latency       median {lat['median_ms']:.3f} ms, p95 {lat['p95_ms']:.3f} ms, "
             f"p99 {lat['p99_ms']:.3f} ms, max {lat['max_ms']:.3f} ms ({lat['n']} commands, "
             "datagram received -> command sent)",
-            f"deadlines     {c['deadline_misses']} misses (budget {report['budget_ms']:.1f} ms)",
+            f"deadlines     {c['deadline_misses']} misses (budget {report['budget_ms']:.1f} ms); "
+            "controller: "
+            + ", ".join(f"{n} {k}" for k, n in sorted(report["controller_status"].items())),
             f"frames        {c['frames']} received, {c['lost']} lost (filled in), "
             f"{c['duplicates']} duplicates, {c['reordered']} reordered, {c['late']} late, "
             f"{s.get('malformed', 0)} malformed, {s.get('ignored', 0)} ignored",

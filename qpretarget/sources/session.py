@@ -197,6 +197,8 @@ class LiveSession:
         self._status_mark: tuple[float, int] | None = None
         self._latency: list[float] = []
         self._step_time: list[float] = []
+        #: Ticks per controller status (``ok``, ``relaxed``, ``held``).
+        self.controller_status: dict[str, int] = {}
         self._rec: dict[str, list[Any]] = collections.defaultdict(list)
         self.t_open: float | None = None
 
@@ -495,6 +497,7 @@ class LiveSession:
         if kind == "live" or kind == "resume":
             self._latency.append(latency)
         self._step_time.append(getattr(cmd.result, "step_time", math.nan))
+        self.controller_status[cmd.status] = self.controller_status.get(cmd.status, 0) + 1
         if self.record:
             r = self._rec
             res = cmd.result
@@ -522,6 +525,7 @@ class LiveSession:
             "source": dict(self.source.counts),
             "latency": latency_stats(self._latency),
             "controller_step": latency_stats(self._step_time),
+            "controller_status": dict(self.controller_status),
             "budget_ms": 1e3 * self.budget,
             "capture_rate": self.rate,
             "control_rate": 1.0 / self.control_dt,
