@@ -307,8 +307,7 @@ def build_physics_model(
 
     Args:
         robot: the robot the run was retargeted with (``load_robot(config["robot"])``).
-        gains: a :data:`~qpretarget.physics.gains.GAIN_PROFILES` name; ``None``: the robot's
-            default (``unitree`` for the G1, ``generic`` otherwise).
+        gains: a :data:`~qpretarget.physics.gains.GAIN_PROFILES` name; ``None``: ``stiff``.
         timestep: physics time step [s].
         self_collision: robot-robot contacts on (off: robot against the floor only).
 
@@ -323,6 +322,10 @@ def build_physics_model(
             f"robot {robot.name!r} has a fixed base; the physics check replays floating-base "
             "humanoids (it asks whether the robot stays up)."
         )
+    if not (math.isfinite(timestep) and 0.0 < timestep <= 0.05):
+        raise PhysicsModelError(
+            f"physics time step {timestep!r} s: give a value in (0, 0.05], e.g. 0.002."
+        )
     profile_name = gains or DEFAULT_PROFILE
     if profile_name not in GAIN_PROFILES:
         raise PhysicsModelError(
@@ -332,7 +335,7 @@ def build_physics_model(
     if profile.robots and robot.name not in profile.robots:
         raise PhysicsModelError(
             f"gain profile {profile_name!r} is written for {', '.join(profile.robots)}, not "
-            f"{robot.name!r}; use --physics-gains generic."
+            f"{robot.name!r}; use --physics-gains stiff or generic."
         )
     urdf = Path(robot.urdf_path)
     text, notes = rewrite_urdf(urdf)
