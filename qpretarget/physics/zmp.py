@@ -4,8 +4,9 @@
 A static-balance retarget keeps the CoM's ground projection inside the support polygon; dynamic
 balance needs the ZMP there. From the run alone (no simulation), per frame, with ``c`` the CoM,
 ``L`` the centroidal angular momentum (pinocchio), ``m`` the mass, ``g`` gravity and ``z0`` the
-floor height (Kajita et al., *Introduction to Humanoid Robotics*, eq. 3.61 with the angular
-momentum term):
+floor height — the point on the floor about which the ground reaction has no horizontal moment,
+from Newton's and Euler's equations of the whole body (the ZMP of the centroidal dynamics, as in
+Kajita et al., *Introduction to Humanoid Robotics*, ch. 3):
 
     x_zmp = c_x - (c_z - z0) cddot_x / (cddot_z + g) - Ldot_y / (m (cddot_z + g))
     y_zmp = c_y - (c_z - z0) cddot_y / (cddot_z + g) + Ldot_x / (m (cddot_z + g))
