@@ -106,5 +106,8 @@ def run(args: argparse.Namespace) -> int:
     print(format_summary(summary, title=title))
     for note in traj.meta.get("skipped_tasks", []):
         print(f"note: task {note!r} has no key-point in this motion; it kept its reference target")
+    for message in traj.meta.get("messages", []):
+        if message.startswith("support phases:"):
+            print(f"note: {message}")
     print(f"wrote {out}")
     return 0

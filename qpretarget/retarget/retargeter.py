@@ -389,6 +389,7 @@ class Retargeter:
         )
         self._flight_root: tuple[np.ndarray, np.ndarray] | None = None
         self._last_foot_yaw: dict[str, float] = {}
+        self._feet_warned = False
         self._first_targets: dict[str, tuple[np.ndarray | None, np.ndarray | None]] = {}
         self._last_waist: tuple[np.ndarray, np.ndarray] | None = None
         if self.support is not None:
@@ -462,6 +463,14 @@ class Retargeter:
                 phase = self.detector.update(t, np.array(pts["left"]), np.array(pts["right"]))
                 if self.stepper is not None and self.detector.flight:
                     phase = "flight"
+            elif self.stepper is not None and not self._feet_warned:
+                # No foot key-points: no phase to switch contacts from; the feet stay planted.
+                self._feet_warned = True
+                self._rec.rows["messages"].append(
+                    f"support phases: the motion has no foot key-points (ankle, toe or heel of "
+                    f"both feet; key-point map {stream.kmap.name!r}): both feet stay planted. Map "
+                    "the feet in the key-point map (docs/motion.md) to make the robot step."
+                )
 
         # 2. Scaling rooted at the robot's supporting feet (Poubel 2014 III.A), blended at
         #    root switches, legs kept off the straight-knee singularity.

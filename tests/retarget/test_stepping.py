@@ -161,3 +161,21 @@ def test_online_push_equals_offline_causal_with_contacts_switching():
     # issue's bound, far above what is measured.
     assert np.abs(q - offline.q).max() < 1e-6
     assert [c.support for c in commands] == list(offline.extra["support_state"])
+
+
+def test_a_motion_without_feet_keeps_them_planted_and_says_so():
+    import yaml
+
+    cmu = yaml.safe_load(
+        (REPO / "qpretarget" / "motion" / "keypoint_maps" / "cmu.yaml").read_text()
+    )
+    for side in ("left", "right"):
+        for p in ("ankle", "toe"):
+            cmu["keypoints"].pop(f"{side}_{p}", None)
+    cmu["name"] = "cmu_without_feet"
+    ctrl = Controller.from_yaml(CONFIG)
+    motion = load_motion(MOCAP / "cmu_16_15_walk.bvh").slice(0.0, 1.0)
+    traj = Retargeter(ctrl, keypoint_map=cmu).retarget(motion)
+    assert traj.contacts.all()  # documented fallback: feet planted, never a crouch or a guess
+    notes = [m for m in traj.meta["messages"] if m.startswith("support phases:")]
+    assert len(notes) == 1 and "no foot key-points" in notes[0] and "cmu_without_feet" in notes[0]
