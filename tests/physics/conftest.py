@@ -6,8 +6,6 @@ from pathlib import Path
 
 import pytest
 
-pytest.importorskip("mujoco")
-
 #: Static-balance config: configs/g1_whole_body_static.yaml when present, else g1_whole_body.yaml;
 #: the start ramp is lengthened to 2 s because the default 0.5 s ramp moves the CoM 6 cm forward
 #: and stops it within 0.25 s, which puts the ZMP past the toes (docs/physics.md).

@@ -5,7 +5,11 @@ from __future__ import annotations
 import json
 import math
 
+import pytest
+
 from qpretarget.cli import main
+
+pytest.importorskip("mujoco")
 
 
 def test_evaluate_physics(drink_run, tmp_path, capsys):

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import builtins
 
-import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from qpretarget.errors import MissingDependencyError
 from qpretarget.physics.model import PhysicsModelError, build_physics_model, set_configuration
+
+mujoco = pytest.importorskip("mujoco")
 
 
 def test_g1_mass_and_kinematics_match_pinocchio(g1_physics):

@@ -13,6 +13,8 @@ from qpretarget.physics.metrics import summarize
 from qpretarget.physics.replay import PhysicsInputError, check_run, replay_run
 from qpretarget.trajectory import RobotTrajectory
 
+pytest.importorskip("mujoco")
+
 
 @pytest.fixture(scope="module")
 def run(drink_run):
