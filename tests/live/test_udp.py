@@ -113,13 +113,14 @@ def test_faults_and_a_two_second_pause(tmp_path: Path, configs_dir: Path, mocap_
     clip = mocap_dir / "cmu_131_04_dance_spin.bvh"
     faults = ["--end", "4.5", "--drop", "100,101", "--duplicate", "150", "--swap", "200",
               "--malformed", "230", "--pause-at", "2.0", "--pause", "2.0"]  # fmt: skip
-    run = run_pair(tmp_path, config, clip, faults)
+    run = run_pair(tmp_path, config, clip, faults, max_wait_ms=300)
     c, src = run["report"]["counts"], run["report"]["source"]
     assert src["malformed"] == 2  # a truncated datagram and one whose size field lies
     assert c["duplicates"] == 1 and c["reordered"] == 1
     # 100 and 101 filled in; the pause's 240 samples: one extrapolated, then held one per
     # capture period until the stream is overdue again, the rest skipped on resume (lost).
-    assert c["lost"] >= 2 and c["extrapolated"] >= 1 and c["resumes"] == 1
+    # (>= 1: a sender stalled over 300 ms by a loaded test machine adds a hold of its own.)
+    assert c["lost"] >= 2 and c["extrapolated"] >= 1 and c["resumes"] >= 1
     assert c["held_frames"] + c["lost"] + c["extrapolated"] >= 240
     t = run["t"]
     np.testing.assert_allclose(np.diff(t), 0.01, atol=1e-9)  # every tick, through the pause
