@@ -104,4 +104,61 @@ class RunRecorder:
         )
 
 
-__all__ = ["RunRecorder"]
+def run_meta(
+    controller: Controller,
+    spec: Any,
+    stream: Any,
+    calibration: Any,
+    rate: float,
+    *,
+    skipped: list[str],
+    messages: list[str],
+    support_log: list[tuple[float, str]],
+) -> dict[str, Any]:
+    """The run's ``meta`` (docs/formats.md): source, rates, filter, tasks, calibration, alignment.
+
+    ``human_alignment`` holds the heading rotation and both origins, so that a viewer can draw
+    the raw ``human/<key-point>`` next to the robot.
+    """
+    cal = calibration
+    motion = stream.skeleton
+    support = spec.support
+    return {
+        "source": motion.source,
+        "capture_rate": motion.rate,
+        "control_rate": rate,
+        "keypoint_map": stream.kmap.name,
+        "scaling": spec.scaling,
+        "filter": {
+            "cutoff_hz": None if stream.filter is None else stream.filter.cutoff_hz,
+            "order": spec.filter_order,
+            "zero_phase": not stream.causal,
+        },
+        "tension": spec.tension,
+        "tasks": {n: [b.keypoint, b.orientation] for n, b in spec.tasks.items()},
+        "skipped_tasks": skipped,
+        "calibration": None if cal is None else cal.to_dict(),
+        "human_alignment": None
+        if cal is None
+        else {
+            "rotation": cal.rotation.round(12).tolist(),
+            "human_origin": [
+                float(cal.human_waist[0]),
+                float(cal.human_waist[1]),
+                float(cal.human_ankle_height),
+            ],
+            "robot_origin": [
+                float(cal.robot_waist[0]),
+                float(cal.robot_waist[1]),
+                float(cal.robot_ankle_height),
+            ],
+        },  # fmt: skip
+        "config_name": controller.config.get("name", ""),
+        "root_nq": controller.robot.root_nq,
+        "messages": messages,
+        "support_log": support_log,
+        "balance_mode": None if support is None else support.mode,
+    }
+
+
+__all__ = ["RunRecorder", "run_meta"]

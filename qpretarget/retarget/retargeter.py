@@ -52,12 +52,11 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import pinocchio as pin
 
 from ..constraints.contacts import Contacts
 from ..control.controller import Controller
 from ..errors import ConfigError
-from ..motion.calibration import Calibration, calibrate, nearest_rotation, yaw_of
+from ..motion.calibration import Calibration, calibrate, nearest_rotation
 from ..motion.human_motion import HumanMotion, MotionError
 from ..motion.keypoints import (
     KEYPOINT_NAMES,
@@ -68,7 +67,8 @@ from ..motion.phases import SIDES, PhaseThresholds, SupportPhaseDetector
 from ..motion.scaling import Scaler, limit_leg_extension
 from ..trajectory import RobotTrajectory
 from .binding import RobotBinding, waist_yaw
-from .record import RunRecorder
+from .feet import FootTargets
+from .record import RunRecorder, run_meta
 from .spec import (
     RetargetError,
     RetargetSpec,
@@ -78,7 +78,7 @@ from .spec import (
 )
 from .stepping import KinematicStepper, StepCommand
 from .stream import Command, KeypointStream, iter_frames
-from .support import FOOT_POINTS, ComEstimate, FootSupport, rot_z
+from .support import FOOT_POINTS, ComEstimate, FootSupport
 from .whole_body import whole_body_config
 
 
@@ -388,7 +388,7 @@ class Retargeter:
             else None
         )
         self._flight_root: tuple[np.ndarray, np.ndarray] | None = None
-        self._last_foot_yaw: dict[str, float] = {}
+        self._foot_targets: FootTargets | None = None
         self._feet_warned = False
         self._first_targets: dict[str, tuple[np.ndarray | None, np.ndarray | None]] = {}
         self._last_waist: tuple[np.ndarray, np.ndarray] | None = None
@@ -618,72 +618,6 @@ class Retargeter:
                 scaled = {k: (v if k in fixed else v + up) for k, v in scaled.items()}
         return scaled
 
-    def _foot_yaw(self, side: str, kp: Mapping[str, np.ndarray]) -> tuple[float | None, bool]:
-        """The person's foot yaw (ankle -> toe) and whether the foot is flat.
-
-        A foot pointing down (its ankle-toe vector's horizontal part under 80 % of the
-        calibration length: toe-off, a kick) has no reliable yaw: the last reliable one is kept.
-        Flat means over 90 % (a pivot is only detected on a flat foot).
-        """
-        toe, ankle = kp.get(f"{side}_toe"), kp.get(f"{side}_ankle")
-        length = self.calibration.human_lengths.get(f"{side}_toe")
-        if toe is None or ankle is None or not length:
-            return None, False
-        d = toe - ankle
-        ratio = math.hypot(d[0], d[1]) / length
-        if not math.isfinite(ratio):
-            return self._last_foot_yaw.get(side), False
-        if ratio >= 0.8:
-            self._last_foot_yaw[side] = yaw_of(d)
-        return self._last_foot_yaw.get(side), ratio >= 0.9
-
-    def _reachable(
-        self, side: str, sole: np.ndarray, R: np.ndarray, hip: np.ndarray | None
-    ) -> np.ndarray:
-        r"""A swing sole position moved towards the scaled hip until the leg reaches it.
-
-        Beyond the leg length the ankle is pulled along the hip-ankle line to ``leg_extension``
-        of it; else, with :math:`h` the hip, :math:`a` the ankle and :math:`\rho L` the
-        ``leg_extension`` share of the leg length, :math:`\lVert a_{xy} - h_{xy} \rVert \le
-        \sqrt{(\rho L)^2 - (h_z - a_z)^2}` (an unreachable target stretches the leg and drags
-        the foot along the ground instead of lifting it).
-        """
-        L = self.leg_lengths.get(side)
-        if L is None or hip is None or not np.all(np.isfinite(hip)):
-            return sole
-        ankle = sole - R @ self.feet.ankle_to_sole[side]
-        if np.linalg.norm(ankle - hip) > L:
-            # Too high or too far for the scaled hip: along the hip-ankle line, at full reach.
-            d3 = ankle - hip
-            ankle = hip + d3 * (self.spec.leg_extension * L / float(np.linalg.norm(d3)))
-            return ankle + R @ self.feet.ankle_to_sole[side]
-        reach2 = (self.spec.leg_extension * L) ** 2 - (hip[2] - ankle[2]) ** 2
-        d = ankle[:2] - hip[:2]
-        n = float(np.hypot(d[0], d[1]))
-        r = math.sqrt(max(reach2, 0.0))
-        if n <= r:
-            return sole
-        out = sole.copy()
-        out[:2] = sole[:2] - d * (1.0 - r / n)
-        return out
-
-    def _stride(self, side: str, stance: pin.SE3, human: np.ndarray) -> np.ndarray:
-        r"""Robot ankle-to-ankle vector of a step from the person's, ``human`` (swing - stance).
-
-        Scaled by the leg-length ratio :math:`s` and turned by the calibration heading; in the
-        stance sole's heading frame the forward part is kept, the lateral part is the robot's
-        reference stance width plus :math:`s` times the person's change of lateral distance
-        since calibration, at least 70 % of the reference width (feet never cross).
-        """
-        cal = self.calibration
-        d = self._leg_scale * (cal.rotation @ human)
-        psi = yaw_of(stance.rotation[:, 0])
-        c, s_ = math.cos(psi), math.sin(psi)
-        fwd, lat = c * d[0] + s_ * d[1], -s_ * d[0] + c * d[1]
-        sign = 1.0 if side == "left" else -1.0
-        lat = sign * max(0.7 * self._width_r, self._width_r + sign * lat - self._width_h)
-        return np.array([c * fwd - s_ * lat, s_ * fwd + c * lat, d[2]])
-
     def _step(
         self,
         t: float,
@@ -692,68 +626,30 @@ class Retargeter:
         rots: Mapping[str, np.ndarray],
     ) -> StepCommand:
         """One tick of the kinematic stepper: contacts switched, anchors moved, sole targets."""
-        ctrl, feet, cal = self.controller, self.feet, self.calibration
+        ctrl, feet, stepper = self.controller, self.feet, self.stepper
         soles = {s: ctrl.state.frame_placement(feet.sole_ids[s]).copy() for s in SIDES}
+        if self._foot_targets is None:
+            self._foot_targets = FootTargets(
+                feet, self.calibration, self._leg_scale, self.leg_lengths,
+                self.spec.leg_extension,
+            )  # fmt: skip
+        ft = self._foot_targets
 
         def waist_dyaw() -> float:
             return waist_yaw(kp, rots) - self._waist_yaw_cal
 
-        desired = {s: feet.swing_sole(s, scaled, kp, cal, soles[s], waist_dyaw) for s in SIDES}
-        human_foot: dict[str, tuple[float, np.ndarray] | None] = {}
-        for s in SIDES:
-            yaw, flat = self._foot_yaw(s, kp)
-            a_s = scaled.get(f"{s}_ankle")
-            ok = yaw is not None and flat and a_s is not None and np.all(np.isfinite(a_s))
-            human_foot[s] = (yaw, a_s) if ok else None
-            if yaw is not None and s in cal.human_foot_yaw:
-                # The sole's yaw follows the person's foot (kept while the foot points down).
-                R = rot_z(yaw - cal.human_foot_yaw[s]) @ feet.sole_ref[s].rotation
-                desired[s] = pin.SE3(R, desired[s].translation)
-        if not self.stepper.started:
-            self.stepper.reset(t, soles, human_foot)
-            self._human_anchor = {
-                side: np.array(kp[f"{side}_ankle"], float)
-                for side in SIDES
-                if f"{side}_ankle" in kp and np.all(np.isfinite(kp[f"{side}_ankle"]))
-            }
-            # Lateral distances of the feet at the start: the robot's, the scaled person's.
-            psi = yaw_of(soles["left"].rotation[:, 0])
-            lateral = np.array([-math.sin(psi), math.cos(psi), 0.0])
-            self._width_r = float(
-                lateral @ (soles["left"].translation - soles["right"].translation)
-            )
-            self._width_h = 0.0
-            if len(self._human_anchor) == 2:
-                d = cal.rotation @ (self._human_anchor["left"] - self._human_anchor["right"])
-                self._width_h = self._leg_scale * float(lateral @ d)
-        # The swing sole's height is the person's foot height (the lowest of its key-points
-        # above their ground, from the detector) times the leg-length ratio; beside a standing
-        # foot, its horizontal place is the person's foot-to-foot vector times that ratio (the
-        # stride of the scaled person, not of the robot's leg proportions).
-        on = self.stepper.contacts
-        for side, d in desired.items():
-            p = d.translation.copy()
-            other = "right" if side == "left" else "left"
-            a, b = kp.get(f"{side}_ankle"), self._human_anchor.get(other)
-            if on == (other,) and a is not None and b is not None:
-                stance = feet.ankle_of(other, soles[other])
-                ankle = stance + self._stride(side, soles[other], a - b)
-                if np.all(np.isfinite(ankle)):
-                    p[:2] = (ankle + d.rotation @ feet.ankle_to_sole[side])[:2]
-            h = self.detector.height.get(side)
-            if h is not None and math.isfinite(h):
-                p[2] = self.stepper.ground + self._leg_scale * h
-            p = self._reachable(side, p, d.rotation, scaled.get(f"{side}_hip"))
-            desired[side] = pin.SE3(d.rotation, p)
-        before = dict(self.stepper.states)
-        cmd = self.stepper.update(t, self.detector.feet, soles, desired, human_foot)
+        desired, human_foot = ft.orient(scaled, kp, soles, waist_dyaw)
+        if not stepper.started:
+            stepper.reset(t, soles, human_foot)
+            ft.start(kp, soles)
+        desired = ft.place(
+            desired, scaled, kp, soles, stepper.contacts, self.detector.height, stepper.ground
+        )
+        before = dict(stepper.states)
+        cmd = stepper.update(t, self.detector.feet, soles, desired, human_foot)
         for side in SIDES:
-            # Where the person's foot touched down: the reference of the next stride (the
-            # person's ankle rolls forward over the toes during stance, a flat robot sole not).
             if before[side] == "swing" and cmd.states[side] != "swing":
-                ankle = kp.get(f"{side}_ankle")
-                if ankle is not None and np.all(np.isfinite(ankle)):
-                    self._human_anchor[side] = np.array(ankle, float)
+                ft.touched_down(side, kp)
         if cmd.switched:
             ctrl.set_contacts([self.support.feet[s].contact for s in cmd.contacts])
         for side, anchor in cmd.anchors.items():
@@ -787,54 +683,14 @@ class Retargeter:
         rec = self._rec if self._stream is not None else None
         if rec is None or not len(rec):
             raise RetargetError("no control tick yet: retarget a motion or push frames first")
-        ctrl = self.controller
         human = {k: np.asarray(v, float) for k, v in self._human_raw.items()}
         human["t"] = np.asarray(self._human_raw_t, float)
-        stream = self._stream
-        cal = self.calibration
-        motion = stream.skeleton
-        meta = {
-            "source": motion.source,
-            "capture_rate": motion.rate,
-            "control_rate": self.rate,
-            "keypoint_map": stream.kmap.name,
-            "scaling": self.spec.scaling,
-            "filter": {
-                "cutoff_hz": None if stream.filter is None else stream.filter.cutoff_hz,
-                "order": self.spec.filter_order,
-                "zero_phase": not stream.causal,
-            },
-            "tension": self.spec.tension,
-            "tasks": {n: [b.keypoint, b.orientation] for n, b in self.spec.tasks.items()},
-            "skipped_tasks": list(self._skipped),
-            "calibration": None if cal is None else cal.to_dict(),
-            "human_alignment": None
-            if cal is None
-            else {
-                "rotation": cal.rotation.round(12).tolist(),
-                "human_origin": [
-                    float(cal.human_waist[0]),
-                    float(cal.human_waist[1]),
-                    float(cal.human_ankle_height),
-                ],
-                "robot_origin": [
-                    float(cal.robot_waist[0]),
-                    float(cal.robot_waist[1]),
-                    float(cal.robot_ankle_height),
-                ],
-            },  # fmt: skip
-            "config_name": ctrl.config.get("name", ""),
-            "root_nq": ctrl.robot.root_nq,
-            "messages": rec.rows["messages"][:50],
-            "support_log": (
-                self.sequencer.log
-                if self.sequencer is not None
-                else self.stepper.log
-                if self.stepper is not None
-                else []
-            ),
-            "balance_mode": None if self.support is None else self.support.mode,
-        }
+        log = self.sequencer or self.stepper
+        meta = run_meta(
+            self.controller, self.spec, self._stream, self.calibration, self.rate,
+            skipped=list(self._skipped), messages=rec.rows["messages"][:50],
+            support_log=[] if log is None else log.log,
+        )  # fmt: skip
         return rec.trajectory(human, meta)
 
 

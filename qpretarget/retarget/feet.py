@@ -1,0 +1,213 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Swing-sole targets of the kinematic balance mode, from the scaled person's feet.
+
+:class:`FootTargets` turns one sample of the person into the sole pose each robot foot should
+have if it swings (docs/retargeting.md, section 4b):
+
+* horizontally, beside a standing foot, the person's foot-to-foot vector since the standing
+  foot touched down times the leg-length ratio :math:`s` (:meth:`FootTargets.stride`): the
+  scaled person's stride, not the robot's leg proportions' (the person's ankle rolls forward
+  over the toes during stance, a flat robot sole does not); laterally the robot's stance width
+  plus :math:`s` times the person's change of width, at least 70 % of it;
+* vertically :math:`s` times the person's foot height (the detector's: the lowest foot
+  key-point above its ground);
+* the yaw of the person's foot (ankle -> toe), kept while the foot points down, within
+  :data:`FOOT_YAW_RANGE` of the waist's turn;
+* pulled within the leg's reach of the scaled hip (:meth:`FootTargets.reachable`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+
+import numpy as np
+import pinocchio as pin
+
+from ..motion.calibration import Calibration, yaw_of
+from ..motion.phases import SIDES
+from .support import FootSupport, rot_z
+
+#: Largest yaw of a swinging sole from the person's waist turn [rad] (a foot held up behind,
+#: sole up, points backwards: followed, it would twist the hip to its limit).
+FOOT_YAW_RANGE = 0.8
+
+_OTHER = {"left": "right", "right": "left"}
+
+
+class FootTargets:
+    """The person's feet -> robot swing-sole targets, for one run.
+
+    Args:
+        feet: The robot's soles (:class:`~qpretarget.retarget.support.FootSupport`).
+        calibration: The run's calibration.
+        leg_scale: Leg-length ratio robot / person :math:`s`.
+        leg_lengths: side -> robot leg length (hip-knee-ankle) [m].
+        leg_extension: Largest share of the leg length a target may ask for.
+    """
+
+    def __init__(
+        self,
+        feet: FootSupport,
+        calibration: Calibration,
+        leg_scale: float,
+        leg_lengths: Mapping[str, float],
+        leg_extension: float,
+    ) -> None:
+        self.feet = feet
+        self.calibration = calibration
+        self.leg_scale = leg_scale
+        self.leg_lengths = dict(leg_lengths)
+        self.leg_extension = leg_extension
+        #: side -> the person's ankle where that foot last touched down.
+        self.human_anchor: dict[str, np.ndarray] = {}
+        self.width_r = 0.0
+        self.width_h = 0.0
+        self._last_yaw: dict[str, float] = {}
+
+    def start(self, kp: Mapping[str, np.ndarray], soles: Mapping[str, pin.SE3]) -> None:
+        """Anchor the person's feet where they are and measure both stance widths."""
+        self.human_anchor = {
+            side: np.array(kp[f"{side}_ankle"], float)
+            for side in SIDES
+            if f"{side}_ankle" in kp and np.all(np.isfinite(kp[f"{side}_ankle"]))
+        }
+        psi = yaw_of(soles["left"].rotation[:, 0])
+        lateral = np.array([-math.sin(psi), math.cos(psi), 0.0])
+        self.width_r = float(lateral @ (soles["left"].translation - soles["right"].translation))
+        self.width_h = 0.0
+        if len(self.human_anchor) == 2:
+            d = self.calibration.rotation @ (self.human_anchor["left"] - self.human_anchor["right"])
+            self.width_h = self.leg_scale * float(lateral @ d)
+
+    def touched_down(self, side: str, kp: Mapping[str, np.ndarray]) -> None:
+        """The person's foot ``side`` is down: the reference of the next stride."""
+        ankle = kp.get(f"{side}_ankle")
+        if ankle is not None and np.all(np.isfinite(ankle)):
+            self.human_anchor[side] = np.array(ankle, float)
+
+    def foot_yaw(self, side: str, kp: Mapping[str, np.ndarray]) -> tuple[float | None, bool]:
+        """The person's foot yaw (ankle -> toe) and whether the foot is flat.
+
+        A foot pointing down (its ankle-toe vector's horizontal part under 80 % of the
+        calibration length: toe-off, a kick) has no reliable yaw: the last reliable one is kept.
+        Flat means over 90 % (a pivot is only detected on a flat foot).
+        """
+        toe, ankle = kp.get(f"{side}_toe"), kp.get(f"{side}_ankle")
+        length = self.calibration.human_lengths.get(f"{side}_toe")
+        if toe is None or ankle is None or not length:
+            return None, False
+        d = toe - ankle
+        ratio = math.hypot(d[0], d[1]) / length
+        if not math.isfinite(ratio):
+            return self._last_yaw.get(side), False
+        if ratio >= 0.8:
+            self._last_yaw[side] = yaw_of(d)
+        return self._last_yaw.get(side), ratio >= 0.9
+
+    def stride(self, side: str, stance: pin.SE3, human: np.ndarray) -> np.ndarray:
+        r"""Robot ankle-to-ankle vector of a step from the person's, ``human`` (swing - stance).
+
+        Scaled by :math:`s` and turned by the calibration heading; in the stance sole's heading
+        frame the forward part is kept, the lateral part is the robot's reference stance width
+        plus :math:`s` times the person's change of lateral distance since calibration, at
+        least 70 % of the reference width (feet never cross).
+        """
+        d = self.leg_scale * (self.calibration.rotation @ human)
+        psi = yaw_of(stance.rotation[:, 0])
+        c, s_ = math.cos(psi), math.sin(psi)
+        fwd, lat = c * d[0] + s_ * d[1], -s_ * d[0] + c * d[1]
+        sign = 1.0 if side == "left" else -1.0
+        lat = sign * max(0.7 * self.width_r, self.width_r + sign * lat - self.width_h)
+        return np.array([c * fwd - s_ * lat, s_ * fwd + c * lat, d[2]])
+
+    def reachable(
+        self, side: str, sole: np.ndarray, R: np.ndarray, hip: np.ndarray | None
+    ) -> np.ndarray:
+        r"""A swing sole position moved towards the scaled hip until the leg reaches it.
+
+        Beyond the leg length the ankle is pulled along the hip-ankle line to ``leg_extension``
+        of it; else, with :math:`h` the hip, :math:`a` the ankle and :math:`\rho L` the
+        ``leg_extension`` share of the leg length, :math:`\lVert a_{xy} - h_{xy} \rVert \le
+        \sqrt{(\rho L)^2 - (h_z - a_z)^2}` (an unreachable target stretches the leg and drags
+        the foot along the ground instead of lifting it).
+        """
+        L = self.leg_lengths.get(side)
+        if L is None or hip is None or not np.all(np.isfinite(hip)):
+            return sole
+        offset = R @ self.feet.ankle_to_sole[side]
+        ankle = sole - offset
+        if np.linalg.norm(ankle - hip) > L:
+            d3 = ankle - hip
+            ankle = hip + d3 * (self.leg_extension * L / float(np.linalg.norm(d3)))
+            return ankle + offset
+        reach2 = (self.leg_extension * L) ** 2 - (hip[2] - ankle[2]) ** 2
+        d = ankle[:2] - hip[:2]
+        n = float(np.hypot(d[0], d[1]))
+        r = math.sqrt(max(reach2, 0.0))
+        if n <= r:
+            return sole
+        out = sole.copy()
+        out[:2] = sole[:2] - d * (1.0 - r / n)
+        return out
+
+    def orient(
+        self,
+        scaled: Mapping[str, np.ndarray],
+        kp: Mapping[str, np.ndarray],
+        soles: Mapping[str, pin.SE3],
+        waist_dyaw: Callable[[], float],
+    ) -> tuple[dict[str, pin.SE3], dict[str, tuple[float, np.ndarray] | None]]:
+        """Swing-sole poses at the scaled ankles, with the feet's yaw.
+
+        Also ``(yaw, scaled ankle)`` of each flat person's foot (for pivots; else ``None``).
+        """
+        feet, cal = self.feet, self.calibration
+        desired = {s: feet.swing_sole(s, scaled, kp, cal, soles[s], waist_dyaw) for s in SIDES}
+        human_foot: dict[str, tuple[float, np.ndarray] | None] = {}
+        for s in SIDES:
+            yaw, flat = self.foot_yaw(s, kp)
+            a_s = scaled.get(f"{s}_ankle")
+            ok = yaw is not None and flat and a_s is not None and bool(np.all(np.isfinite(a_s)))
+            human_foot[s] = (yaw, a_s) if ok and yaw is not None and a_s is not None else None
+            if yaw is not None and s in cal.human_foot_yaw:
+                dpsi = yaw - cal.human_foot_yaw[s]
+                base = waist_dyaw()
+                off = math.atan2(math.sin(dpsi - base), math.cos(dpsi - base))
+                dpsi = base + max(-FOOT_YAW_RANGE, min(FOOT_YAW_RANGE, off))
+                R = rot_z(dpsi) @ feet.sole_ref[s].rotation
+                desired[s] = pin.SE3(R, desired[s].translation)
+        return desired, human_foot
+
+    def place(
+        self,
+        desired: dict[str, pin.SE3],
+        scaled: Mapping[str, np.ndarray],
+        kp: Mapping[str, np.ndarray],
+        soles: Mapping[str, pin.SE3],
+        standing: tuple[str, ...],
+        heights: Mapping[str, float],
+        ground: float,
+    ) -> dict[str, pin.SE3]:
+        """Place the swing soles (see the module docstring).
+
+        Stride beside a standing foot, the person's foot height, within the leg's reach.
+        """
+        feet = self.feet
+        for side, d in desired.items():
+            p = d.translation.copy()
+            other = _OTHER[side]
+            a, b = kp.get(f"{side}_ankle"), self.human_anchor.get(other)
+            if standing == (other,) and a is not None and b is not None:
+                ankle = feet.ankle_of(other, soles[other]) + self.stride(side, soles[other], a - b)
+                if np.all(np.isfinite(ankle)):
+                    p[:2] = (ankle + d.rotation @ feet.ankle_to_sole[side])[:2]
+            h = heights.get(side)
+            if h is not None and math.isfinite(h):
+                p[2] = ground + self.leg_scale * h
+            p = self.reachable(side, p, d.rotation, scaled.get(f"{side}_hip"))
+            desired[side] = pin.SE3(d.rotation, p)
+        return desired
+
+
+__all__ = ["FOOT_YAW_RANGE", "FootTargets"]
