@@ -23,9 +23,10 @@ Profiles (:data:`GAIN_PROFILES`):
 * ``stiff`` (any robot, the default): a stiff servo within the robot's torque limits,
   ``kp = tau_max / 0.05 rad`` (the full URDF effort at 2.9 deg of error) and ``kd = 0.02 s * kp``;
   armature 0.01, damping 0.05, frictionloss 0. Not a vendor's tuning: the vendor gains above are
-  the inner loop of a balance policy, and on their own (PD only, no policy) they let the G1 fold at
-  the ankles even in a quiet stance (docs/physics.md measures it); the stiff servo asks instead
-  whether the motion itself — its momentum, contacts and torques — is one the robot can carry out.
+  the inner loop of a balance policy, and on their own (PD and feed-forward, no policy) they let
+  the G1 fall even on the standing gesture clips (docs/physics.md measures it); the stiff servo
+  asks instead whether the motion itself — its momentum, contacts and torques — is one the robot
+  can carry out.
 * ``generic`` (any robot): ``kp = I w^2``, ``kd = 2 zeta I w`` from ``I``, the joint's apparent
   inertia in the standing posture (MuJoCo ``dof_M0``, the joint-space inertia's diagonal), with
   ``w = 2 pi 5 Hz`` and ``zeta = 1``; armature 0.01, damping 0.05, frictionloss 0 — a documented
