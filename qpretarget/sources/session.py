@@ -25,7 +25,8 @@ expected arrival of sample ``n`` is ``a_n = b + n / rate`` with ``b`` the lower 
 **Falling behind.** When the oldest datagram waiting is older than ``max_lag`` (the loop was
 slower than the stream: a slow tick, a loaded machine), the backlog is **skipped**: the input jumps
 to the newest datagram and blends into it as after a hold, so latency stays bounded instead of
-growing with the queue.
+growing with the queue; a loop stalled past ``max_lag`` while nothing arrived fills only the slot
+due now.
 
 A datagram whose sample is already pushed is a **duplicate**; one that arrives after a higher
 sample but in time is **reordered** (and used); one whose slot was already filled in is **late**
@@ -384,6 +385,12 @@ class LiveSession:
             deadline = self._base + n * P + self.max_wait
             if now < deadline:
                 return
+            overdue = int((now - deadline) * self.rate)
+            if not self._buffer and now - deadline > self.max_lag and overdue > 0:
+                # The loop itself was stalled past max_lag: fill only the slot due now.
+                self.counts["skipped"] += overdue
+                n += overdue
+                deadline += overdue * P
             if self._buffer and self._last is not None:
                 m = min(self._buffer)
                 w = 1.0 / (m - n + 1)

@@ -235,3 +235,13 @@ def test_random_network_keeps_the_input_regular(seed: int) -> None:
     assert (kinds == "interpolated").sum() <= c["lost"]
     assert c["frames"] == len(events)
     assert np.all(np.isfinite([p[1] for p in rec.pushed]))
+
+
+def test_a_stalled_loop_does_not_replay_every_missed_hold() -> None:
+    s, rec = session()
+    s.max_lag = 0.05
+    deliver(s, list(range(10)))
+    s.advance(9 * P + 2.0)  # nothing came and the loop itself slept for 2 s
+    assert len(rec.pushed) <= 12 and s.counts["skipped"] >= 190
+    times = np.array([p[0] for p in rec.pushed])
+    np.testing.assert_array_equal(times, np.arange(len(times)) / RATE)
