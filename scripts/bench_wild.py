@@ -113,6 +113,8 @@ def run_wild(
     held_status: Counter[str] = Counter()
     drift = overshoot = 0.0
     com_margin = com_margin_shrunk = np.inf
+    sc = next((c for c in ctrl.constraints if c.type_name == "self_collision"), None)
+    min_pair = np.inf
     times = np.empty(ticks)
     cpu = np.empty(ticks)
     for k in range(ticks):
@@ -148,12 +150,13 @@ def run_wild(
             drift = max(drift, float(np.linalg.norm(state.frame_placement(f).translation - p0)))
         qa = res.q[qi]
         overshoot = max(overshoot, float(np.max(qmin - qa)), float(np.max(qa - qmax)))
+        if sc is not None:
+            min_pair = min(min_pair, float(getattr(sc, "min_distance", np.inf)))
         if poly is not None:
             m = poly.com_margin(state)
             com_margin_shrunk = min(com_margin_shrunk, m)
             com_margin = min(com_margin, m + poly.effective_margin)
     us, cpu_us = times * 1e6, cpu * 1e6
-    sc = next((c for c in ctrl.constraints if c.type_name == "self_collision"), None)
     return {
         "config": str(config) if not isinstance(config, dict) else config.get("name", "mapping"),
         "solver": str(ctrl.solver_spec),
@@ -171,6 +174,7 @@ def run_wild(
         "tick_us": _stats(us),
         "tick_cpu_us": _stats(cpu_us),
         "self_collision_pairs": len(getattr(sc, "pairs", [])),
+        "min_pair_distance_m": float(min_pair),
         "q_final": ctrl.q.tolist(),
     }
 
@@ -268,7 +272,10 @@ def main() -> None:
             f"  CoM margin       {r['com_margin_m'] * 1e3:.2f} mm to the soles' hull, "
             f"{r['com_margin_shrunk_m'] * 1e3:.2f} mm to the shrunk hull"
         )
-    print(f"  self-collision   {r['self_collision_pairs']} pairs")
+    print(
+        f"  self-collision   {r['self_collision_pairs']} pairs, closest "
+        f"{r['min_pair_distance_m'] * 1e3:.1f} mm (hulls; negative: penetration)"
+    )
     for label, x in (("wall", t), ("thread CPU", c)):
         print(
             f"  tick [us] {label:10s} median {x['median']:.0f}, p95 {x['p95']:.0f}, "

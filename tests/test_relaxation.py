@@ -164,3 +164,88 @@ def test_relaxed_step_keeps_what_did_not_give(g1, monkeypatch) -> None:
         if name not in res.relaxed:
             assert np.max(viol[rows], initial=0.0) < 1e-6, name
     assert np.all(np.abs(res.v) <= g1.v_max + 1e-9)
+
+
+def test_soft_key_and_merge_order(g1) -> None:
+    """``soft:`` on any constraint overrides its class default; a soft constraint's box bounds
+    are merged after every hard one's (they give to the acceleration limits, never the reverse)."""
+    cfg = whole_body_config(g1)
+    cfg["constraints"].append(
+        {"type": "self_collision", "pairs": [["left_wrist_yaw_link", "torso_link"]], "soft": True}
+    )
+    ctrl = Controller(cfg)
+    sc = ctrl.constraint("self_collision")
+    assert sc.is_soft() and not ctrl.constraint("contacts").is_soft()
+    assert [g.name for g in ctrl.soft_rows()] == ["support_polygon", "self_collision"]
+    order = [c.name for c in ctrl.bound_constraints]
+    assert order.index("self_collision") > order.index("acceleration_limits")
+    cfg["constraints"][-1]["soft"] = False
+    assert not Controller(cfg).constraint("self_collision").is_soft()
+    cfg["constraints"][-1]["soft"] = "yes"
+    with pytest.raises(ConfigError, match=r"constraints\[\d\]\.soft"):
+        Controller(cfg)
+
+
+def test_soft_rows_change_nothing_while_they_can_hold(g1) -> None:
+    """Exact penalty: on ticks where the polygon rows can hold, the soft QP's velocity is the hard
+    QP's, to DAQP's accuracy (1e-7 rad/s; the two QPs differ in size, so not to the bit)."""
+    runs = []
+    for soft in (True, False):
+        cfg = whole_body_config(g1)
+        cfg["solver"] = {"name": "daqp"}
+        cfg["constraints"][3]["soft"] = soft
+        ctrl = Controller(cfg)
+        hand = ctrl.tasks["left_hand"].position_target.copy()
+        vs = []
+        for k in range(30):
+            res = ctrl.step({"left_hand": hand + [0.1 * np.sin(k / 5), 0.05, 0.0]})
+            assert res.status == "ok", res.messages
+            vs.append(res.v)
+        runs.append(np.array(vs))
+    assert np.abs(runs[0] - runs[1]).max() < 1e-7
+
+
+def test_a_tick_without_solution_brakes(g1) -> None:
+    """Out of iterations (a budget of 1 on a moving robot): the tick is flagged held and brakes
+    at the acceleration limit towards zero (never v = 0 from full speed), the feet kept to first
+    order (a few mm at most for the one tick)."""
+    cfg = whole_body_config(g1)
+    cfg["solver"] = {"name": "daqp"}
+    ctrl = Controller(cfg)
+    hand = ctrl.tasks["left_hand"].position_target.copy()
+    for _ in range(15):  # get the arm moving
+        res = ctrl.step({"left_hand": hand + [0.3, 0.2, 0.2]})
+    v_prev = np.array(res.v)
+    assert np.abs(v_prev).max() > 1.0
+    ctrl.strategy._solver.settings["iter_limit"] = 1
+    con = ctrl.constraint("contacts")
+    feet = [ctrl.state.frame_placement(f).translation.copy() for f in con.frame_ids]
+    res = ctrl.step({"left_hand": hand - [0.3, 0.2, 0.2]})
+    assert res.status == "held" and "braking" in res.messages[-1], res.messages
+    a_dt = 100.0 * 0.01  # a_max dt of whole_body_config
+    vi = g1.joint_v_index
+    dv = np.abs(res.v[vi] - v_prev[vi])
+    assert dv.max() <= a_dt + 1e-9  # within the acceleration limits
+    assert np.all(np.abs(res.v[vi]) <= np.abs(v_prev[vi]) + 1e-12)  # slower, never faster
+    assert np.abs(res.v[vi]).max() > 0  # not frozen from full speed
+    for f, p0 in zip(con.frame_ids, feet, strict=True):
+        assert np.linalg.norm(ctrl.state.frame_placement(f).translation - p0) < 5e-3
+
+
+def test_braking_bound_is_viable() -> None:
+    """Del Prete 2018's viability, for the closed form of acceleration_limits: from any admissible
+    (distance, speed), braking one tick at a_max lands on an admissible one again, so joint
+    position limits stay reachable under the acceleration limits (units a_max dt, a_max dt^2;
+    1e-9 for round-off). 20000 seeded states, gains 0.5-1."""
+    from qpretarget.constraints.acceleration_limits import AccelerationLimits
+
+    rng = np.random.default_rng(0)
+    for gamma in (0.5, 0.9, 0.95, 1.0):
+        con = AccelerationLimits(a_max=1.0)
+        con._set_gamma(gamma)
+        delta = rng.uniform(0, 200, 5000)
+        nu_max = con._nu_max(delta.copy())
+        nu = rng.uniform(0, 1, 5000) * nu_max
+        nxt = con._nu_max(delta - nu)  # distance left after the tick
+        assert np.all(nu - 1 <= nxt + 1e-9), gamma
+        assert np.all(nu <= gamma * delta + 1e-9)  # and the joint_limits bound holds

@@ -25,7 +25,17 @@ conservative closed form
     \qquad K_0 = -c/\gamma - c(c - 1)/2,
 
 and :math:`|v| \le a_{max} dt\, \nu_{max}` towards each limit (for large :math:`\delta` this is the
-familiar :math:`v \approx \sqrt{2 a_{max} d}`). The bound is clipped to
+familiar :math:`v \approx \sqrt{2 a_{max} d}`). This is a *viability* constraint in the sense of
+Del Prete 2018 ("Joint position and velocity bounds in discrete-time acceleration/torque control
+of robot manipulators", IEEE RA-L 3(1)): the discrete-time bound on the velocity from which the
+joint can still stop before its limit. It is recursively feasible: with
+:math:`f(\nu) = \max_{j \ge 0} [(\nu - j)/\gamma + j\nu - j(j-1)/2]` (so that
+:math:`\nu \le \nu_{max}(\delta) \Leftrightarrow f(\nu) \le \delta`), substituting
+:math:`j' = j + 1` gives :math:`f(\nu - 1) = \max_{j' \ge 1}[\dots] - \nu \le f(\nu) - \nu`, so
+braking one tick from an admissible :math:`(\delta, \nu)` lands on an admissible
+:math:`(\delta - \nu, \nu - 1)`: from any state the controller produced, the box of joint
+position, velocity and acceleration limits is never empty (``tests/test_relaxation.py``,
+docs/reliability.md). The bound is clipped to
 :math:`v_{prev} \mp a_{max} dt` so the module's own bounds never cross. The bounds are merged with
 the other box bounds; this module's ``importance`` (80) is below joint position and velocity
 limits, so when stopping in time is impossible anyway (a start outside the limits) it is the

@@ -19,8 +19,10 @@ so the tick's QP always has a solution and a conflict costs accuracy, not motion
 :math:`w` above the row's Lagrange multiplier the slack is exactly zero whenever the rows can hold
 (exact penalty: Nocedal & Wright 2006, Theorem 17.3; Fletcher 1987, 12.3), so a soft row is as
 hard as a hard one until the hard set leaves no room. :attr:`Constraint.soft` declares it (by
-default: rows of constraints with ``importance`` below :data:`SOFT_BELOW`), and
-:meth:`Constraint.penalty_weight` gives :math:`w`.
+default: rows of constraints with ``importance`` below :data:`SOFT_BELOW`), the YAML key
+``soft: true|false`` of any constraint overrides it (:attr:`Constraint.soft_override`), and
+:meth:`Constraint.penalty_weight` gives :math:`w`. A soft constraint's box bounds are merged after
+every hard constraint's, so they give to the hard box.
 """
 
 from __future__ import annotations
@@ -38,13 +40,14 @@ from ..robot import RobotModel, RobotState
 
 CONSTRAINTS = Registry("constraint")
 
-#: Row constraints less important than this are soft unless they say otherwise (module docstring):
-#: ``support_polygon`` (60), ``self_collision`` (70), ``ground`` (75); ``contacts`` (100) is hard.
+#: Row constraints less important than this are soft unless they (or the YAML ``soft:``) say
+#: otherwise (module docstring): ``support_polygon`` (60), ``ground`` (75); ``self_collision`` (85)
+#: and ``contacts`` (100) are hard by default.
 SOFT_BELOW = 80
 #: Exact-penalty weight of the least important soft constraint, per unit of slack (the rows' own
 #: units, [m/s] for distances and the CoM): 9 times the largest CoM-polygon multiplier (1.1e4)
 #: measured on the wild-target scenario (docs/reliability.md). Each importance step of 10 multiplies
-#: it by 10, so the CoM polygon gives before a collision margin, and a margin before the ground.
+#: it by 10, so the CoM polygon gives before the ground, and the ground before a collision margin.
 SOFT_WEIGHT = 1e5
 
 
@@ -83,11 +86,17 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
     #: Rows may give behind an exact-penalty slack (module docstring); ``None``: soft when
     #: ``importance < SOFT_BELOW``. Box bounds are never soft (they give in the bound merge).
     soft: ClassVar[bool | None] = None
+    #: Where the module's *box* bounds sit in the merge (``None``: :attr:`importance`). A box that
+    #: is only an accuracy device (a collision pair's trust region) can sit below the
+    #: acceleration limits (80) while its rows stay above them.
+    box_importance: ClassVar[int | None] = None
 
     def __init__(self, name: str | None = None) -> None:
         if name is not None and (not isinstance(name, str) or not name):
             raise ConfigError(f"name must be a non-empty string, got {name!r}.")
         self.name = name or self.type_name
+        #: The YAML ``soft:`` of this constraint (``None``: the class's :attr:`soft`).
+        self.soft_override: bool | None = None
         self.n_rows = 0
         self.robot: RobotModel | None = None
         #: Where the constraint sits in the YAML (``constraints[i]``), for error messages.
@@ -95,7 +104,14 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
 
     def is_soft(self) -> bool:
         """Whether this constraint's rows get exact-penalty slacks (see :attr:`soft`)."""
+        if self.soft_override is not None:
+            return self.soft_override
         return self.importance < SOFT_BELOW if self.soft is None else bool(self.soft)
+
+    def merge_rank(self) -> tuple[bool, int]:
+        """Sort key of the box merge: hard before soft, then most important first."""
+        imp = self.importance if self.box_importance is None else self.box_importance
+        return (self.n_rows > 0 and self.is_soft(), -imp)
 
     def penalty_weight(self) -> float:
         r"""Exact-penalty weight :math:`w` of this constraint's slacks [cost per row unit].

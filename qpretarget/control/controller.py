@@ -90,7 +90,8 @@ class Controller:
         level_impl: the :class:`~qpretarget.control.levels.Level` solving each tick.
         fallback: the relaxation fallback, or ``None`` (``fallback: {enabled: false}``).
         row_constraints: constraints contributing rows, in YAML order (rows stacked so).
-        bound_constraints: every constraint, most important first (box bounds merged so).
+        bound_constraints: every constraint, hard ones first, each group most important first
+            (``Constraint.merge_rank``; box bounds merged so).
 
     Raises:
         ConfigError: on any invalid entry, with the YAML path of the problem.
@@ -116,7 +117,9 @@ class Controller:
         self.row_constraints = [c for c in self.constraints if c.n_rows > 0]
         self.n_rows = sum(c.n_rows for c in self.row_constraints)
         # Bounds are merged from most to least important (a less important bound gives).
-        self.bound_constraints = sorted(self.constraints, key=lambda c: -c.importance)
+        # ... and the boxes of soft row constraints (a collision pair's trust region) after every
+        # hard one: a soft constraint never makes the acceleration limits give.
+        self.bound_constraints = sorted(self.constraints, key=lambda c: c.merge_rank())
         rtype, rkwargs = schema.typed_section(
             cfg.get("regularization"), "regularization", "identity"
         )
@@ -180,7 +183,11 @@ class Controller:
         constraints: list[Constraint] = []
         for path, type_name, kwargs in schema.typed_list(self.config, "constraints"):
             cls = CONSTRAINTS.lookup(type_name, path=f"{path}.type")
+            soft = kwargs.pop("soft", None)  # every constraint's key (constraints/base.py)
+            if soft is not None and not isinstance(soft, bool):
+                raise ConfigError(f"soft must be true or false, got {soft!r}.", path=f"{path}.soft")
             con: Constraint = build_from_spec(cls, kwargs, path=path)
+            con.soft_override = soft
             con.bind(self.robot, path=path)
             con.yaml_path = path
             if any(c.name == con.name for c in constraints):
