@@ -43,8 +43,10 @@ with :math:`w_h` the person's waist key-point, :math:`w_r` the robot's pelvis fr
   the first sample, robot minus person (the person's pelvis frame from the hips and the
   waist-neck direction), largest magnitude in degrees;
 * *stance slip*: for each stance of a robot foot (touch-down to lift-off: its ``contacts`` column,
-  else the sole lower than 5 mm), the largest distance of the sole from where it touched down;
-  the largest over stances [mm];
+  else the sole lower than 5 mm), the largest horizontal distance of the sole from where it
+  touched down, the largest over stances [mm] (horizontal, as ``foot_slip`` of
+  ``qpretarget evaluate``); the vertical one apart as the *stance settle* (a sole put down
+  a few millimetres up and pressed flat onto the floor);
 * *sole below ground*: the lowest sole height under the first-sample height [mm];
 * *held ticks*: samples with status ``held``.
 """
@@ -386,6 +388,7 @@ def _feet_metrics(
     }
     # Stance slip.
     slip: dict[str, float] = {}
+    settles: dict[str, float] = {}
     stances = 0
     contacts = None if traj.contacts is None else np.asarray(traj.contacts, bool)
     for x, sole in rs.sole.items():
@@ -394,12 +397,16 @@ def _feet_metrics(
             on = contacts[:, col]
         else:
             on = h_r[x] < OFF_GROUND
-        worst = 0.0
+        worst = settle = 0.0
         for i, j in intervals(on, t):
             stances += 1
-            worst = max(worst, float(np.max(np.linalg.norm(sole[i:j] - sole[i], axis=1))))
+            d = sole[i:j] - sole[i]
+            worst = max(worst, float(np.max(np.linalg.norm(d[:, :2], axis=1))))
+            settle = max(settle, float(np.max(np.abs(d[:, 2]))))
         slip[x] = worst * 1e3
+        settles[x] = settle * 1e3
     out["stance_slip_mm"] = {"max": max(slip.values()) if slip else 0.0, **slip}
+    out["stance_settle_mm"] = {"max": max(settles.values()) if settles else 0.0, **settles}
     out["stances"] = stances
     return out
 
@@ -431,8 +438,9 @@ def format_human_metrics(m: Mapping[str, Any]) -> list[str]:
             f"  swing height    ratio min {f(sw['min'])}, median {f(sw['median'])} "
             f"over {sw['lifts']} lift(s) > 5 cm; lift agreement {f(m['lift_agreement'])}",
             f"  flight          robot {fl['robot']}, human {fl['human']} interval(s)",
-            f"  stance slip     max {m['stance_slip_mm']['max']:.3f} mm over "
-            f"{m['stances']} stance(s); sole below ground {m['sole_below_ground_mm']:.2f} mm",
+            f"  stance slip     max {m['stance_slip_mm']['max']:.3f} mm (settle "
+            f"{m['stance_settle_mm']['max']:.2f} mm) over {m['stances']} stance(s); "
+            f"sole below ground {m['sole_below_ground_mm']:.2f} mm",
         ]
     if "ankle_displacement_error_legs" in m:
         a = m["ankle_displacement_error_legs"]

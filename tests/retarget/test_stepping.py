@@ -141,6 +141,20 @@ def test_kicks_lift_the_robot_foot():
     # Every human lift over 5 cm (the kicks) is followed by the robot foot to >= 70 % height.
     assert m["swing_height_ratio"]["lifts"] >= 3
     assert m["swing_height_ratio"]["min"] >= 0.7
+    assert m["stance_slip_mm"]["max"] < 1.0  # horizontal, as evaluate's foot_slip
+    assert m["held_ticks"] == 0
+
+
+def test_both_feet_leave_the_ground_when_the_person_jumps():
+    traj, m, ctrl = _run("cgspeed_cmu_01_01_playground_jumps.bvh")
+    # Flight (both feet up): as many robot intervals as the person's (12 measured), the robot
+    # in flight for most of the person's flight time (86 % measured: detection delay at each
+    # take-off and landing).
+    assert m["flight"]["human"] >= 10
+    assert m["flight"]["robot"] == m["flight"]["human"]
+    assert m["flight"]["shared_share"] >= 0.8
+    assert m["stance_slip_mm"]["max"] < 1.0
+    assert _limit_overshoot(traj, ctrl.robot) <= 1e-9
     assert m["held_ticks"] == 0
 
 
