@@ -64,7 +64,7 @@ from ..tasks import CostBlock, Task
 from ..validation import positive_float
 from .levels import Level, LevelOutcome
 from .relaxation import Fallback
-from .velocity import solve_with_fallback
+from .velocity import braking_velocity, solve_with_fallback
 
 #: ``Task.drift_kind`` of a task whose drift is a finite difference of its Jacobian.
 FD = "finite_difference"
@@ -318,19 +318,21 @@ class AccelerationLevel(Level):
         return out
 
     def _hold(self, tp: TickProblem, res_v: StrategyResult, out: LevelOutcome) -> np.ndarray:
-        """No velocity-level solution: hold as the velocity level does (``v+ = 0``, ``q+ = q``).
+        """No velocity-level solution: brake as the velocity level does.
 
-        The acceleration QP has the same feasible set (the map alpha -> v+ is a bijection).
+        Never ``v+ = 0`` from full speed: :func:`~qpretarget.control.velocity.braking_velocity`,
+        every limited joint slowing by ``a_max dt`` within the tick's box, the contacts kept to
+        first order.
         """
-        v = tp.state.v
-        self.qdot_c = v.copy()
-        self.alpha = np.zeros_like(v)
+        v_b = braking_velocity(tp)
+        self.qdot_c = v_b.copy()
+        self.alpha = (v_b - tp.state.v) * (1.0 / tp.dt)
         out.status = "held"
         out.messages.append(
             f"tick {tp.tick}: no usable velocity-level solution (solver status "
-            f"{res_v.status}); holding the configuration (alpha_c = -qdot/dt, v = 0)."
+            f"{res_v.status}); braking at the acceleration limits with the feet kept."
         )
-        return np.zeros_like(v)
+        return v_b
 
     def _transcribe_constraints(
         self, tp: TickProblem, qdot_c: np.ndarray, s: np.ndarray, widen: bool

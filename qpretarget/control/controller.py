@@ -15,7 +15,8 @@ kinematics pass (:meth:`Controller.build_tick`), let the control level solve
 :class:`~qpretarget.control.acceleration.AccelerationLevel`, see
 :class:`~qpretarget.control.levels.Level`), apply the motion and refresh the kinematics, then
 return a :class:`~qpretarget.control.result.StepResult` and notify the observers. A failed tick
-never raises: the controller holds (``v = 0``), reports why in the result, and goes on.
+never raises: the controller brakes within the acceleration limits (status ``held``), reports why
+in the result, and goes on (docs/reliability.md).
 """
 
 from __future__ import annotations
