@@ -9,8 +9,10 @@ from __future__ import annotations
 import json
 import select
 import signal
+import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -20,7 +22,7 @@ from qpretarget.control.controller import Controller
 from qpretarget.motion import load_motion
 from qpretarget.motion.human_motion import HumanMotion
 from qpretarget.retarget import Retargeter
-from qpretarget.sources import mvn
+from qpretarget.sources import decode_command, mvn
 
 CAPTURE = 120.0
 
@@ -35,10 +37,26 @@ def run_pair(
     frame is extrapolated.
     """
     record = tmp_path / "live.npz"
+    # The robot's side: a socket drained by a thread, receiving the published commands.
+    robot = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    robot.bind(("127.0.0.1", 0))
+    robot.settimeout(0.2)
+    received: list[bytes] = []
+    done = threading.Event()
+
+    def drain() -> None:
+        while not done.is_set():
+            try:
+                received.append(robot.recv(65536))
+            except TimeoutError:
+                pass
+
+    reader = threading.Thread(target=drain, daemon=True)
+    reader.start()
     live = subprocess.Popen(
         [sys.executable, "-m", "qpretarget", "live", str(config), "--source", "xsens:0",
          "--capture-rate", str(CAPTURE), "--max-wait", str(max_wait_ms), "--max-lag", "10000",
-         "--record", str(record),
+         "--record", str(record), "--publish", f"udp://127.0.0.1:{robot.getsockname()[1]}",
          "--json", "--quiet"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
@@ -59,11 +77,16 @@ def run_pair(
     finally:
         if live.poll() is None:
             live.kill()
+        time.sleep(0.3)
+        done.set()
+        reader.join()
+        robot.close()
     assert live.returncode == 0, err
     report = json.loads(out.strip().splitlines()[-1])
     data = dict(np.load(record))
     assert json.loads(str(data["report"]))["counts"] == report["counts"]
     data["report"] = report
+    data["published"] = [decode_command(d) for d in received]
     return data
 
 
@@ -103,6 +126,11 @@ def test_live_equals_offline_causal_run(tmp_path: Path, configs_dir: Path, mocap
     k = int(live.sum())
     assert k >= len(q_ref) - 2
     np.testing.assert_allclose(run["q"][live], q_ref[:k], rtol=0, atol=1e-6)
+    # What the robot received over UDP: every tick once, in order, the same commands.
+    pub = run["published"]
+    assert [c["tick"] for c in pub] == list(range(len(t)))
+    np.testing.assert_array_equal(np.array([c["q"] for c in pub]), run["q"])
+    np.testing.assert_array_equal([c["t"] for c in pub], t)
     lat = rep["latency"]
     assert lat["n"] == k and 0 < lat["median_ms"] <= lat["p95_ms"] <= lat["p99_ms"]
     assert np.all(np.isfinite(run["latency"][live]))
