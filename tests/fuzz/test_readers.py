@@ -144,6 +144,21 @@ def test_non_finite_bvh_offsets(tmp_path, controller, value):
     _check(_write(tmp_path, "off.bvh", bad), controller)
 
 
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf, 1e30])
+def test_non_finite_c3d_points(tmp_path, rng, controller, value):
+    """Float C3D (negative scale, Intel order): 200 random point coordinates of the data section
+    overwritten with NaN, inf or 1e30; missing data or an error, never NaN/inf q."""
+    import struct
+
+    data = bytearray(C3D)
+    assert struct.unpack("<f", data[12:16])[0] < 0  # float points
+    start = (struct.unpack("<H", data[16:18])[0] - 1) * 512
+    words = rng.integers(0, (len(data) - start) // 4, size=200)
+    for w in words:
+        data[start + 4 * w : start + 4 * w + 4] = struct.pack("<f", value)
+    _check(_write(tmp_path, "nan.c3d", bytes(data)), controller)
+
+
 @pytest.mark.parametrize("fmt", ["bvh", "amc", "c3d"])
 def test_binary_garbage(tmp_path, rng, controller, fmt):
     garbage = rng.integers(0, 256, size=4096, dtype=np.uint8).tobytes()
