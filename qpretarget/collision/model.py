@@ -232,6 +232,10 @@ class CollisionModel:
         self._model = model
         self._q_last = np.zeros(model.nq)
         self._fresh = True
+        self._zero = np.zeros(self.n_pairs)
+        self._cut = np.inf  # ranked updates: last K-th smallest gap + rank_margin
+        #: Margin added to the last call's K-th smallest gap to make the next cut [m].
+        self.rank_margin = 0.005
         #: Indices of the pairs closer than the influence distance, and their witness points
         #: (world, (k, 3)) and unit normals from a to b, after :meth:`update`.
         self.active = np.zeros(0, dtype=int)
@@ -247,13 +251,32 @@ class CollisionModel:
         """Forget the temporal-coherence bounds (next :meth:`update` computes every pair)."""
         self._fresh = True
 
-    def update(self, state: RobotState, influence: float = np.inf) -> np.ndarray:
-        """Distances of this tick; witness points of the pairs closer than ``influence``.
+    def update(
+        self,
+        state: RobotState,
+        influence: float = np.inf,
+        *,
+        nearest: int | None = None,
+        offset: np.ndarray | None = None,
+    ) -> np.ndarray:
+        r"""Distances of this tick; witness points of the pairs closer than ``influence``.
+
+        With ``nearest = K`` (capped rows), only what the :math:`K` smallest gaps
+        :math:`g = d - o` (``offset`` :math:`o`: the safety distances) need is computed. The
+        last call's :math:`K`-th smallest gap plus a margin is the cut :math:`X`; the first round
+        computes the candidates whose lower bound has :math:`\underline d - o < X`. Every other
+        pair then has :math:`g \ge \underline d - o \ge X`, so if :math:`K` computed gaps are
+        below :math:`X` they are the :math:`K` smallest, exactly as if every candidate had been
+        computed; otherwise a second round computes the remaining candidates. The pairs left out
+        keep their lower bounds.
 
         Args:
             state: kinematics of the tick (``state.data`` must hold the joint placements and
                 ``data.J`` of ``state.q``, as after :meth:`RobotState.update`).
             influence: pairs provably farther than this are not computed exactly [m].
+            nearest: compute only what the ``nearest`` smallest gaps need (``None``: every
+                candidate).
+            offset: (P,) subtracted from the distances to rank the gaps [m] (default 0).
 
         Returns:
             :attr:`distances` (P,): exact where :attr:`exact`, lower bounds elsewhere.
@@ -261,9 +284,11 @@ class CollisionModel:
         t0 = time.perf_counter()
         q = state.q
         lb = self.distances
+        ranked = nearest is not None and self.broad_phase and not self._fresh
         if self._fresh or not self.broad_phase or influence == np.inf:
             lb.fill(-np.inf)
             self._fresh = False
+            ranked = False
         else:
             dq = pin.difference(self._model, self._q_last, q)
             lb -= self._pair_lever @ np.abs(dq, out=dq)
@@ -275,36 +300,43 @@ class CollisionModel:
                 np.copyto(self._thr, influence)
                 self._thr[self._flags] += self.hysteresis
                 self._thr_key = (influence, self._flag_bytes)
-            need = lb < self._thr
+            cand = lb < self._thr
         else:
-            need = lb < influence
-        nb = need.tobytes()
-        if nb != self._flag_bytes:
-            gd = self.gdata
-            for i in np.flatnonzero(need != self._flags).tolist():
-                if need[i]:
-                    gd.activateCollisionPair(i)
-                else:
-                    gd.deactivateCollisionPair(i)
-            self._flags = need
-            self._flag_bytes = nb
-            self._idx = np.flatnonzero(need)
-            self._idx_list = self._idx.tolist()
+            cand = lb < influence
+        off = self._zero if offset is None else offset
+        need = cand & (lb - off < self._cut) if ranked else cand
+        self._set_flags(need)
+        placed = False
+        if self._idx.size:
+            pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
+            placed = True
+            pin.computeDistances(self.gmodel, self.gdata)
+            lb[self._idx] = [self._results[i].min_distance for i in self._idx_list]
+        if ranked and nearest is not None:
+            g = lb[self._idx] - off[self._idx]
+            found = int(np.count_nonzero((g < self._cut) & (lb[self._idx] < influence)))
+            if found < nearest and (cand & ~need).any():  # second round: every candidate
+                self._set_flags(cand)
+                if not placed:
+                    pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
+                pin.computeDistances(self.gmodel, self.gdata)
+                lb[self._idx] = [self._results[i].min_distance for i in self._idx_list]
+        if nearest is not None:  # next call's cut: this K-th smallest gap + rank_margin
+            close = lb[self._idx] < influence
+            g = lb[self._idx][close] - off[self._idx][close]
+            self._cut = (
+                float(np.partition(g, nearest - 1)[nearest - 1]) + self.rank_margin
+                if g.size >= nearest
+                else np.inf
+            )
         idx = self._idx
         self.exact = self._flags
         act = idx
         sel: list[Any] = []
         if idx.size:
-            pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
-            pin.computeDistances(self.gmodel, self.gdata)
+            act = idx[lb[idx] < influence]
             res = self._results
-            sel = [res[i] for i in self._idx_list]
-            dl = [r.min_distance for r in sel]
-            lb[idx] = dl
-            if max(dl) >= influence:
-                keep = [x < influence for x in dl]
-                act = idx[keep]
-                sel = [r for r, c in zip(sel, keep, strict=True) if c]
+            sel = [res[i] for i in act.tolist()]
         self.active = act
         # Witness points and normals are read from the results on demand (:meth:`witnesses`):
         # each read crosses into C++, and capped rows need only the closest pairs'.
@@ -313,6 +345,22 @@ class CollisionModel:
         self.last_n_computed = int(idx.size)
         self.last_update_time = time.perf_counter() - t0
         return lb
+
+    def _set_flags(self, need: np.ndarray) -> None:
+        """Switch the geometry data's active pairs to ``need`` (only the changed ones)."""
+        nb = need.tobytes()
+        if nb == self._flag_bytes:
+            return
+        gd = self.gdata
+        for i in np.flatnonzero(need != self._flags).tolist():
+            if need[i]:
+                gd.activateCollisionPair(i)
+            else:
+                gd.deactivateCollisionPair(i)
+        self._flags = need
+        self._flag_bytes = nb
+        self._idx = np.flatnonzero(need)
+        self._idx_list = self._idx.tolist()
 
     def witnesses(self, sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Witness points on body a and unit normals from a to b, (k, 3) each.

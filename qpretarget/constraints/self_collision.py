@@ -47,7 +47,7 @@ from .base import CONSTRAINTS, Constraint, ConstraintBlock
 #: Smallest trust-region scale (the step bound shrinks at most by its square root, 1/64).
 MIN_TRUST_SCALE = 1.0 / 4096
 #: QP rows of an ``auto`` pair set unless ``max_rows`` says otherwise.
-AUTO_MAX_ROWS = 12
+AUTO_MAX_ROWS = 24
 #: ``trust_gap_fraction`` of an ``auto`` pair set unless given: a pair's linearization may err by
 #: a tenth of its gap to the safety distance (pairs near at rest stay within d_i all along).
 AUTO_TRUST_GAP = 0.1
@@ -201,6 +201,7 @@ class DistanceDamper(Constraint):
         self._safety_scalar = float(self.safety[0]) if P and uniform else None
         # Direct rows (row i = pair i) unless rows are capped or a subclass disarms some.
         self._direct = self.max_rows is None and not self.disarms_rows
+        self._nearest = self.n_rows if self.max_rows is not None and not self.disarms_rows else None
         # Trust-region step bound per pair and coordinate at scale 1: sqrt(2 eps / r) [rad].
         assert self.model is not None
         eps = self.trust_region if self.trust_region is not None else np.inf
@@ -257,7 +258,9 @@ class DistanceDamper(Constraint):
         t0 = time.perf_counter()
         model = self.model
         assert model is not None
-        model.update(state, self.d_i)
+        # Capped rows: only what the n_rows smallest gaps need is computed exactly
+        # (CollisionModel.update), so the GJK calls per tick follow n_rows, not the pair count.
+        model.update(state, self.d_i, nearest=self._nearest, offset=self.safety)
         act = model.active
         if self._direct or act.size == 0:
             pairs = act

@@ -196,7 +196,7 @@ def test_auto_pairs_are_reproducible_and_not_touching(robot_name, g1):
         assert parents[joints[y]] != joints[x]
     if robot_name == "talos":  # Talos has an SRDF with disabled pairs
         assert any("SRDF" in r for r in a.left_out)
-    assert a.n_rows == min(len(a.pairs), 12)
+    assert a.n_rows == min(len(a.pairs), 24)
 
 
 def test_recovery_from_inside_a_pair(g1, meter):
