@@ -16,6 +16,7 @@ HELP = """examples:
   # two terminals: a clip streamed as an MVN suit would, and the live retargeter
   qpretarget stream ../shared/data/mocap/cmu_131_04_dance_spin.bvh --to udp://127.0.0.1:9763
   qpretarget live configs/g1_whole_body.yaml --source xsens:9763 --capture-rate 120
+  qpretarget live CONFIG --source xsens --run live_run.npz    then: qpretarget evaluate live_run.npz
 
 Sources: xsens[:PORT] (Xsens MVN network streamer, MXTP02 over UDP), file:CLIP (BVH, AMC, C3D).
 Ctrl-C stops cleanly; --record writes the run (commands, latencies, frames) to an .npz file.
@@ -72,7 +73,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--record",
         default=None,
         metavar="OUT.npz",
-        help="write the run here when it stops (atomic)",
+        help="write the live record here when it stops (atomic; docs/live.md)",
+    )
+    p.add_argument(
+        "--run",
+        default=None,
+        metavar="RUN.npz",
+        help="also write the retargeter's run file (docs/formats.md) for evaluate / view",
     )
     p.add_argument(
         "--budget",
@@ -152,6 +159,7 @@ def run(args: argparse.Namespace) -> int:
         if value is not None and not value > 0:
             raise ConfigError(f"--{name.replace('_', '-')} must be positive, got {value}.")
     record = check_output_file(args.record, ".npz") if args.record else None
+    run_file = check_output_file(args.run, ".npz") if args.run else None
     options = {
         "host": args.host,
         "capture_rate": args.capture_rate,
@@ -212,6 +220,15 @@ def run(args: argparse.Namespace) -> int:
             print(f"wrote {record}", file=sys.stderr)
         else:
             print(f"nothing received: {record} not written", file=sys.stderr)
+    if run_file is not None:
+        if session.counts["ticks"]:
+            from ..fileio import atomic_path
+
+            with atomic_path(run_file, suffix=".npz") as tmp:
+                retargeter.trajectory().save(tmp)
+            print(f"wrote {run_file}", file=sys.stderr)
+        else:
+            print(f"nothing received: {run_file} not written", file=sys.stderr)
     if args.json:
         print(json.dumps(report))
     else:

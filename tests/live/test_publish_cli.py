@@ -24,6 +24,7 @@ from qpretarget.sources import (
 from qpretarget.sources.file import FileSource
 from qpretarget.sources.publish import COMMAND_HEADER, STATUS_FLAGS
 from qpretarget.sources.xsens import XsensSource
+from qpretarget.trajectory import RobotTrajectory
 
 
 def _cmd(**kw) -> LiveCommand:
@@ -112,15 +113,18 @@ def test_file_source_plays_in_real_time(mocap_dir: Path) -> None:
 def test_live_on_a_file_source_runs_and_writes_the_record(
     tmp_path: Path, configs_dir: Path, mocap_dir: Path, capsys
 ) -> None:
-    out = tmp_path / "run.npz"
+    out, run_file = tmp_path / "live.npz", tmp_path / "run.npz"
     code = main(["live", str(configs_dir / "g1_whole_body.yaml"), "--source",
                  f"file:{mocap_dir / 'cmu_17_10_boxing.bvh'}", "--speed", "4", "--duration",
-                 "0.5", "--record", str(out), "--quiet"])  # fmt: skip
+                 "0.5", "--record", str(out), "--run", str(run_file), "--quiet"])  # fmt: skip
     assert code == 0 and out.is_file()
     text = capsys.readouterr().out
     assert "latency" in text and "deadlines" in text
     run = np.load(out)
     assert len(run["t"]) > 10 and run["q"].shape[1] == 36
+    # The run file is the retargeter's own (what evaluate / view read): the same commands.
+    traj = RobotTrajectory.load(run_file)
+    np.testing.assert_array_equal(traj.q, run["q"])
 
 
 def test_command_errors_are_one_line(tmp_path: Path, configs_dir: Path, capsys) -> None:
