@@ -196,7 +196,7 @@ class SupportPhaseDetector:
                 if th.min_duration <= 0:
                     self._support[side] = raw
                     self._pending[side] = None
-            elif t - self._pending[side] >= th.min_duration - 1e-12:
+            elif t - float(self._pending[side] or 0.0) >= th.min_duration - 1e-12:
                 self._support[side] = raw
                 self._pending[side] = None
         self._t_prev = t
@@ -523,6 +523,20 @@ class SupportSequencer:
         z = max(float(desired.translation[2]), self.ground + clearance)
         return pin.SE3(R, np.array([xy[0], xy[1], z]))
 
+    @property
+    def _com_move(self) -> _Move:
+        """The CoM move in progress (set in every state that reads it)."""
+        if self._com is None:
+            raise RuntimeError("SupportSequencer: no CoM move; call reset() first")
+        return self._com
+
+    @property
+    def _foot_move(self) -> _PoseMove:
+        """The foot move in progress (set in the lift and lower states)."""
+        if self._foot is None:
+            raise RuntimeError("SupportSequencer: no foot move in this state")
+        return self._foot
+
     # ------------------------------------------------------------------------------ the tick
     def update(
         self,
@@ -564,9 +578,9 @@ class SupportSequencer:
             elif human_phase != side:
                 self._enter(t, f"com_to_{human_phase}")
                 self._move_com(t, self.support_point(human_phase))
-            elif self._com.done(t):
-                close = np.linalg.norm(com_xy - self._com.at(t)) <= st.com_tolerance
-                if close or t - (self._com.t0 + self._com.duration) >= st.timeout:
+            elif self._com_move.done(t):
+                close = np.linalg.norm(com_xy - self._com_move.at(t)) <= st.com_tolerance
+                if close or t - (self._com_move.t0 + self._com_move.duration) >= st.timeout:
                     swing_side = _OTHER[side]
                     self.contacts = (side,)
                     start = soles[swing_side]
@@ -582,9 +596,9 @@ class SupportSequencer:
             support = _OTHER[swing_side]
             if human_phase in ("double", swing_side):
                 self._start_lowering(t, support, swing)
-            elif self._foot.done(t):
+            elif self._foot_move.done(t):
                 self._enter(t, support)
-                self._swing_target = self._foot.end.copy()
+                self._swing_target = self._foot_move.end.copy()
         elif state in SIDES:
             support = state
             swing_side = _OTHER[support]
@@ -593,18 +607,20 @@ class SupportSequencer:
         elif state.startswith("lower_"):
             swing_side = state[len("lower_") :]
             support = _OTHER[swing_side]
-            if self._foot.done(t):
+            if self._foot_move.done(t):
                 sole = soles[swing_side]
                 height = float(sole.translation[2]) - self.ground
-                miss = float(np.linalg.norm(sole.translation[:2] - self._foot.end.translation[:2]))
+                miss = float(
+                    np.linalg.norm(sole.translation[:2] - self._foot_move.end.translation[:2])
+                )
                 down = abs(height) <= st.land_tolerance and miss <= 5.0 * st.land_tolerance
-                late = t - (self._foot.t0 + self._foot.duration) >= st.timeout
+                late = t - (self._foot_move.t0 + self._foot_move.duration) >= st.timeout
                 touching = abs(height) <= 3.0 * st.land_tolerance
                 if late and not touching and not self._replanned:
                     # The robot cannot reach the landing spot: put the foot back where it rose.
                     self._replanned = True
                     self.log.append((t, f"replan_{swing_side}"))
-                    self._move_foot(t, self._foot.at(t), self._lift_anchor.copy())
+                    self._move_foot(t, self._foot_move.at(t), self._lift_anchor.copy())
                 elif down or (late and touching) or (late and self._replanned):
                     self.contacts = SIDES
                     self.anchors[swing_side] = soles[swing_side].copy()
@@ -622,7 +638,7 @@ class SupportSequencer:
             if human_phase in SIDES:
                 self._enter(t, f"com_to_{human_phase}")
                 self._move_com(t, self.support_point(human_phase))
-            elif self._com.done(t):
+            elif self._com_move.done(t):
                 self._enter(t, "double")
 
         # Targets of this tick.
@@ -633,7 +649,7 @@ class SupportSequencer:
         state = self.state
         if state.startswith(("lift_", "lower_")):
             swing_side = state.split("_", 1)[1]
-            feet[swing_side] = self._foot.at(t)
+            feet[swing_side] = self._foot_move.at(t)
         elif state in SIDES:
             support = state
             swing_side = _OTHER[support]

@@ -180,9 +180,8 @@ class RobotBinding:
             p_t = None
             if b.keypoint is not None:
                 k = b.keypoint
-                gone = missing.get(k, True) or (
-                    parents.get(k) is not None and missing.get(parents[k], False)
-                )
+                parent = parents.get(k)
+                gone = missing.get(k, True) or (parent is not None and missing.get(parent, False))
                 if gone or k not in scaled:
                     p_t = np.full(3, np.nan)
                 else:
@@ -191,7 +190,7 @@ class RobotBinding:
                         off = R_t @ R_ref.T @ off
                     p_t = scaled[k] + off
                     if first is not None:
-                        R0, p0 = first.get(name, (None, None))[1], None
+                        p0: np.ndarray | None = None
                         entry = first.get(f"{name}/p")
                         if entry is None:
                             first[f"{name}/p"] = (p_t.copy(), None)
@@ -204,7 +203,7 @@ class RobotBinding:
                         p_t = p_ref + ramp * (p_t - p_ref)
             p_ok = p_t is not None and bool(np.all(np.isfinite(p_t)))
             R_ok = R_t is not None and bool(np.all(np.isfinite(R_t)))
-            if p_ok and R_ok:
+            if p_ok and R_ok and R_t is not None and p_t is not None:
                 targets[name] = pose_matrix(R_t, p_t)
             elif p_ok or (p_t is not None and not R_ok):
                 targets[name] = p_t

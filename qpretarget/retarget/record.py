@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -60,7 +60,7 @@ class RunRecorder:
             active = set(self.contacts.active_feet)
             r["contacts"].append([n in active for n in self.contacts.names])
         for n in self.pos_tasks:
-            task = ctrl.tasks[n]
+            task = cast(Any, ctrl.tasks[n])  # a task with a position (pos_tasks)
             self.targets[n].append(np.array(task.position_target, float))
             self.actual[n].append(task.current_pose(ctrl.state)[0].copy())
         for k, v in scaled.items():

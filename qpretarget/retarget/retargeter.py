@@ -48,7 +48,7 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -63,8 +63,10 @@ from ..motion.keypoints import (
     KeypointMapError,
     resolve_keypoint_map,
 )
-from ..motion.phases import SIDES, PhaseThresholds, SupportPhaseDetector
+from ..motion.phases import SIDES, PhaseThresholds, SupportCommand, SupportPhaseDetector
 from ..motion.scaling import Scaler, limit_leg_extension
+from ..tasks.com import ComTask
+from ..tasks.frame import FrameTask
 from ..trajectory import RobotTrajectory
 from .binding import RobotBinding, waist_yaw
 from .feet import FootTargets
@@ -72,6 +74,7 @@ from .record import RunRecorder, run_meta
 from .spec import (
     RetargetError,
     RetargetSpec,
+    SupportSpec,
     TaskBinding,
     _number,
     default_robot_keypoints,
@@ -197,8 +200,8 @@ class Retargeter:
                 )
         t_out, y, raw = stream.offline(motion)
         self._begin(stream, float(motion.t[0]))
-        self._human_raw_t = motion.t.copy()
-        self._human_raw = raw
+        self._human_raw_t: Any = motion.t.copy()
+        self._human_raw: dict[str, Any] = dict(raw)
         total = len(t_out)
         bar = None
         if progress is True:
@@ -245,8 +248,8 @@ class Retargeter:
                 raise ValueError("give the capture rate: start(names, rate=120.0)")
             names = list(skeleton)
             skeleton = HumanMotion(
-                t=[0.0], names=names, positions=np.zeros((1, len(names), 3)),
-                parents=[-1] * len(names), rate=float(rate), source="stream",
+                t=np.array([0.0]), names=tuple(names), positions=np.zeros((1, len(names), 3)),
+                parents=tuple([-1] * len(names)), rate=float(rate), source="stream",
             )  # fmt: skip
         elif rate is not None:
             skeleton = HumanMotion(
@@ -303,6 +306,43 @@ class Retargeter:
         """End the stream: emit the ticks up to the last frame (spline end rule)."""
         stream = self._require_stream()
         return [c for to, y in stream.flush() for c in self._tick(float(to), y)]
+
+    # -------------------------------------------------------------------- narrowed state
+    @property
+    def _cal(self) -> Calibration:
+        if self.calibration is None:
+            raise RetargetError("not calibrated yet")
+        return self.calibration
+
+    @property
+    def _scl(self) -> Scaler:
+        if self.scaler is None:
+            raise RetargetError("not calibrated yet")
+        return self.scaler
+
+    @property
+    def _fs(self) -> FootSupport:
+        if self.feet is None:
+            raise RetargetError("no retarget.support section")
+        return self.feet
+
+    @property
+    def _sup(self) -> SupportSpec:
+        if self.support is None:
+            raise RetargetError("no retarget.support section")
+        return self.support
+
+    @property
+    def _stp(self) -> KinematicStepper:
+        if self.stepper is None:
+            raise RetargetError("not in the kinematic balance mode")
+        return self.stepper
+
+    @property
+    def _con(self) -> Contacts:
+        if self.contacts is None:
+            raise RetargetError("the controller has no contacts constraint")
+        return self.contacts
 
     # -------------------------------------------------------------------- internals
     def _require_stream(self) -> KeypointStream:
@@ -365,7 +405,7 @@ class Retargeter:
         # fallback's solver, so a run after a relaxed tick differed in the last bits from a fresh
         # one (and a sensitive closed loop amplifies that). Reset it here until reset() does.
         fallback_solver = getattr(getattr(ctrl, "fallback", None), "solver", None)
-        if hasattr(fallback_solver, "reset"):
+        if fallback_solver is not None and hasattr(fallback_solver, "reset"):
             fallback_solver.reset()
         self.calibration: Calibration | None = None
         self.scaler: Scaler | None = None
@@ -396,17 +436,18 @@ class Retargeter:
             ctrl.set_contacts([fb.contact for fb in self.support.feet.values()])
         self._t_first: float | None = t0
         self._root: str | None = None
+        self._last_anchors: dict[str, np.ndarray] = {}
         self._blend: tuple[float, np.ndarray] | None = None
         self._targets_ref = {n: (p.copy(), R.copy()) for n, (p, R) in self.task_reference.items()}
 
     def _calibrate(self, samples: list[tuple[float, np.ndarray]]) -> None:
-        stream = self._stream
+        stream = self._require_stream()
         unpacked = [stream.unpack(y) for _, y in samples]
         human = {k: np.array([u[0][k] for u in unpacked]) for k in stream.keypoints}
         waist_R = None
         if "waist" in stream.orientations:
             waist_R = np.array([nearest_rotation(u[1]["waist"]) for u in unpacked])
-        foot_R = {s: self.feet.sole_ref[s].rotation for s in SIDES} if self.feet else None
+        foot_R = {s: self._fs.sole_ref[s].rotation for s in SIDES} if self.feet else None
         self.calibration = calibrate(
             human,
             {k: v for k, v in self.robot_points.items()},
@@ -415,7 +456,7 @@ class Retargeter:
             robot_foot_rotations=foot_R,
         )
         self.scaler = Scaler(self.calibration, self.spec.scaling)
-        cal = self.calibration
+        cal = self._cal
         legs = [f"{side}_{p}" for side in SIDES for p in ("knee", "ankle")]
         robot_l = sum(cal.robot_lengths.get(k, math.nan) for k in legs)
         human_l = sum(cal.human_lengths.get(k, math.nan) for k in legs)
@@ -433,7 +474,7 @@ class Retargeter:
             # Calibrate on the first `calibration.frames` samples where the waist is seen (marker
             # data may start with gaps); the samples before are then run with missing targets.
             self._pending.append((t, y))
-            kp, _, missing = self._stream.unpack(y)
+            kp, _, missing = self._require_stream().unpack(y)
             if not missing.get("waist", True) and np.all(np.isfinite(kp["waist"])):
                 self._calibration_samples.append((t, y))
             if len(self._calibration_samples) < self.spec.calibration_frames:
@@ -445,8 +486,7 @@ class Retargeter:
 
     # The per-tick work: scaling, phases, targets, controller step, record.
     def _process(self, t: float, y: np.ndarray) -> Command:
-        ctrl, cal, stream = self.controller, self.calibration, self._stream
-        assert cal is not None and self.scaler is not None
+        ctrl, cal, stream = self.controller, self._cal, self._require_stream()
         if self._t_first is None:
             self._t_first = t
         kp, rots, missing = stream.unpack(y)
@@ -479,9 +519,10 @@ class Retargeter:
         # 3. Support sequences (Poubel 2014 Table I); the upper body is shifted horizontally so
         #    that its estimated CoM is where the sequence puts the robot's CoM.
         support_state = ""
-        cmd = None
+        cmd: SupportCommand | StepCommand | None = None
+        seq: SupportCommand | None = None
         if self.sequencer is not None:
-            feet = self.feet
+            feet = self._fs
             soles = {s: state.frame_placement(feet.sole_ids[s]).copy() for s in SIDES}
             com = state.com()
             if not self.sequencer.log:
@@ -492,21 +533,22 @@ class Retargeter:
 
             swing = {s: feet.swing_sole(s, scaled, kp, cal, soles[s], waist_dyaw) for s in SIDES}
             predicted = self.com_estimate.predicted(scaled, com, state.data)
-            cmd = self.sequencer.update(t, phase, soles, com[:2], swing, predicted)
-            support_state = cmd.state
-            if cmd.switched:
-                ctrl.set_contacts([self.support.feet[s].contact for s in cmd.contacts])
+            seq = cmd = self.sequencer.update(t, phase, soles, com[:2], swing, predicted)
+            support_state = seq.state
+            if seq.switched:
+                ctrl.set_contacts([self._sup.feet[s].contact for s in seq.contacts])
             natural = self.com_estimate.natural(scaled)
             if natural is not None and predicted is not None:
-                w = cmd.free_weight
+                w = seq.free_weight
                 reference = w * predicted + (1.0 - w) * natural
-                shift = np.array([cmd.com[0] - reference[0], cmd.com[1] - reference[1], 0.0])
+                shift = np.array([seq.com[0] - reference[0], seq.com[1] - reference[1], 0.0])
                 scaled = {k: (v if k in FOOT_POINTS else v + shift) for k, v in scaled.items()}
 
         # 3'. Kinematic stepping: each foot's contact follows the person's foot.
         if self.stepper is not None:
-            cmd = self._step(t, scaled, kp, rots)
-            support_state = cmd.label
+            step = self._step(t, scaled, kp, rots)
+            support_state = step.label
+            cmd = step
 
         # 4. Task targets (ramped in from the reference posture over ramp_time).
         first = self._first_targets if self.stepper is not None else None
@@ -514,17 +556,17 @@ class Retargeter:
         self.binding.task_targets(
             targets, cal, self._targets_ref, ramp, self._skipped, scaled, kp, rots, missing, first
         )
-        if cmd is not None and self.support.com_task is not None and self.sequencer is not None:
-            com_task = ctrl.tasks[self.support.com_task]
-            full = np.array(com_task.target, float)
+        if seq is not None and self._sup.com_task is not None:
+            com_task = cast(ComTask, ctrl.tasks[self._sup.com_task])
+            full = np.array(com_task.target, dtype=float)
             ramp = self._ramp(t)
-            full[:2] = self.com_reference[:2] + ramp * (cmd.com - self.com_reference[:2])
-            targets[self.support.com_task] = full
+            full[:2] = self.com_reference[:2] + ramp * (seq.com - self.com_reference[:2])
+            targets[self._sup.com_task] = full
         if cmd is not None:
             for side, sole in cmd.feet.items():
-                task_name = self.support.feet[side].task
-                M = sole * self.feet.sole_to_task[side]
-                if ctrl.tasks[task_name].has_orientation:
+                task_name = self._sup.feet[side].task
+                M = sole * self._fs.sole_to_task[side]
+                if cast(FrameTask, ctrl.tasks[task_name]).has_orientation:
                     targets[task_name] = M.homogeneous
                 else:
                     targets[task_name] = M.translation.copy()
@@ -538,7 +580,7 @@ class Retargeter:
         self, t: float, human: Mapping[str, np.ndarray]
     ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """Scaled key-points and the supporting ankles they are rooted at."""
-        cal, state = self.calibration, self.controller.state
+        cal, state = self._cal, self.controller.state
         if self.stepper is not None:
             # Rooted at the robot's standing feet the person stands on too (Poubel 2014 eq. 1
             # from the support foot; never the mid-ankle point while a leg is in the air), else
@@ -546,23 +588,23 @@ class Retargeter:
             # A foot the person stands on that the robot is still putting down counts at its
             # landing spot (rooting at the robot's other foot would place the body from the
             # person's foot in the air).
-            on = self.stepper.contacts
+            on = self._stp.contacts
             support = self.detector.feet
-            soles = {s: state.frame_placement(self.feet.sole_ids[s]) for s in on}
+            soles = {s: state.frame_placement(self._fs.sole_ids[s]) for s in on}
             for s in SIDES:
                 spot = self.stepper.landing_spot(s)
                 if spot is not None and support.get(s, True):
                     soles[s] = spot
             use = [s for s in soles if support.get(s, True)] or list(on)
             root = "flight" if not use else "double" if len(use) == 2 else use[0]
-            anchors = {s: self.feet.ankle_of(s, soles[s]) for s in use}
+            anchors = {s: self._fs.ankle_of(s, soles[s]) for s in use}
             if root == "flight" and self._root != "flight" and self._last_waist is not None:
                 self._flight_root = self._last_waist
         elif self.sequencer is not None:
             on = self.sequencer.contacts
             root = "double" if len(on) == 2 else on[0]
             anchors = {
-                s: self.feet.ankle_of(s, state.frame_placement(self.feet.sole_ids[s])) for s in on
+                s: self._fs.ankle_of(s, state.frame_placement(self._fs.sole_ids[s])) for s in on
             }
         else:
             root = "double"
@@ -584,7 +626,7 @@ class Retargeter:
         else:
             scaled = {k: (v if k in anchors_points(anchors) else v + offset)
                       for k, v in scaled.items()}  # fmt: skip
-        if self.leg_lengths and anchors and self.scaler.method == "poubel":
+        if self.leg_lengths and anchors and self._scl.method == "poubel":
             scaled, _ = limit_leg_extension(
                 scaled, anchors, self.leg_lengths, self.spec.leg_extension
             )
@@ -599,14 +641,14 @@ class Retargeter:
         In flight the waist moves from where it left the ground like the person's, scaled by the
         calibration's root scale, and the rest follows by Poubel 2014 eq. 1 from it.
         """
-        cal = self.calibration
+        cal = self._cal
         if root == "flight" and self._flight_root is not None:
             w_r, w_h = self._flight_root
             waist = w_r + cal.root_scale * (cal.rotation @ (human["waist"] - w_h))
             if np.all(np.isfinite(waist)):
-                return self.scaler.scale_rooted(human, "waist", waist)
-        scaled = self.scaler.scale(human, support=root, anchors=anchors)
-        if self.stepper is not None and root in SIDES and self.scaler.method == "poubel":
+                return self._scl.scale_rooted(human, "waist", waist)
+        scaled = self._scl.scale(human, support=root, anchors=anchors)
+        if self.stepper is not None and root in SIDES and self._scl.method == "poubel":
             # Kinematic single support: the pelvis height is the person's, scaled by the leg
             # ratio (the chain from the support foot places it horizontally); the standing foot
             # stays. (Double support keeps Poubel's mid-ankle to mid-hip loop.)
@@ -626,11 +668,11 @@ class Retargeter:
         rots: Mapping[str, np.ndarray],
     ) -> StepCommand:
         """One tick of the kinematic stepper: contacts switched, anchors moved, sole targets."""
-        ctrl, feet, stepper = self.controller, self.feet, self.stepper
+        ctrl, feet, stepper = self.controller, self._fs, self._stp
         soles = {s: ctrl.state.frame_placement(feet.sole_ids[s]).copy() for s in SIDES}
         if self._foot_targets is None:
             self._foot_targets = FootTargets(
-                feet, self.calibration, self._leg_scale, self.leg_lengths,
+                feet, self._cal, self._leg_scale, self.leg_lengths,
                 self.spec.leg_extension,
             )  # fmt: skip
         ft = self._foot_targets
@@ -651,16 +693,16 @@ class Retargeter:
             if before[side] == "swing" and cmd.states[side] != "swing":
                 ft.touched_down(side, kp)
         if cmd.switched:
-            ctrl.set_contacts([self.support.feet[s].contact for s in cmd.contacts])
+            ctrl.set_contacts([self._sup.feet[s].contact for s in cmd.contacts])
         for side, anchor in cmd.anchors.items():
-            self.contacts.set_anchor(self.support.feet[side].contact, anchor)
+            self._con.set_anchor(self._sup.feet[side].contact, anchor)
         return cmd
 
     def _ramp(self, t: float) -> float:
         """Start ramp weight: minimum-jerk from 0 to 1 over ``calibration.ramp_time``."""
         if self.spec.ramp_time <= 0:
             return 1.0
-        s = (t - self._t_first) / self.spec.ramp_time
+        s = (t - (t if self._t_first is None else self._t_first)) / self.spec.ramp_time
         return 1.0 if s >= 1 else s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
 
     def _blend_offset(self, t: float) -> np.ndarray | None:

@@ -21,6 +21,7 @@ from ..motion.keypoints import KEYPOINT_NAMES, KeypointMapError, load_keypoint_m
 from ..motion.phases import SIDES, PhaseThresholds, SequencerSettings
 from ..motion.scaling import SCALING_METHODS
 from ..tasks.com import ComTask
+from ..tasks.frame import FrameTask
 from .stepping import StepSettings
 
 #: Keys of the ``retarget:`` section.
@@ -371,9 +372,9 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
             same = [
                 n
                 for n, t in controller.tasks.items()
-                if getattr(t, "frame_id", None) is not None
+                if isinstance(t, FrameTask)
                 and _same_body(robot, t.frame_id, frame_id)
-                and getattr(t, "has_position", False)
+                and t.has_position
             ]
             if len(same) != 1:
                 raise ConfigError(
@@ -390,7 +391,11 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
                 path=f"{fpath}.task",
             )
         t = controller.tasks[task]
-        if not getattr(t, "has_position", False) or not _same_body(robot, t.frame_id, frame_id):
+        if (
+            not isinstance(t, FrameTask)
+            or not t.has_position
+            or not _same_body(robot, t.frame_id, frame_id)
+        ):
             raise ConfigError(
                 f"task {task!r} must track the position (ideally the pose) of a frame on the "
                 f"{side} foot's body ({robot.model.frames[frame_id].name}).",
@@ -399,7 +404,7 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
         feet[side] = FootBinding(contact, task)
     com_task = raw.get("com_task")
     if com_task is None:
-        coms = [n for n, t in controller.tasks.items() if isinstance(t, ComTask)]
+        coms: list[str | None] = [n for n, t in controller.tasks.items() if isinstance(t, ComTask)]
         if len(coms) != 1 and mode == "kinematic":
             coms = [None]
         elif len(coms) != 1:

@@ -88,6 +88,8 @@ class KeypointStream:
             return frame[self._index[name]]
 
         def rotation_of(name: str) -> np.ndarray:
+            if rotations is None:
+                raise ValueError(f"the stream has no joint orientations for {name!r}")
             return rotations[self._index[name]]
 
         pts = self.kmap.evaluate(position_of, rotation_of if rotations is not None else None)
@@ -95,7 +97,7 @@ class KeypointStream:
         return pts, rots
 
     # -------------------------------------------------------------------- offline
-    def offline(self, motion: HumanMotion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def offline(self, motion: HumanMotion) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """Control-rate samples of a whole motion: ``(t_out, y, raw key-points)``.
 
         Zero phase: batch ``filtfilt`` and ``upsample``. Causal: the streaming code of

@@ -127,7 +127,7 @@ def whole_body_config(
     if name != robot:
         raise ConfigError(f"the base config is for robot {spec!r}, not {robot!r}.", path="robot")
     if limits:
-        spec = {"name": robot} if isinstance(spec, str) else dict(spec)
+        spec = {"name": robot} if isinstance(spec, str) else dict(spec or {})
         merged = dict(spec.get("position_limits") or {})
         for joint, bounds in limits.items():
             merged.setdefault(joint, bounds)
