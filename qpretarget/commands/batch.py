@@ -45,7 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--physics",
         action="store_true",
-        help="replay each clip in MuJoCo (physics extra): physics/* summary columns",
+        help="replay each clip in MuJoCo (physics extra): <clip>.physics.json/.png, physics/* "
+        "summary columns",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -58,6 +59,10 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import ConfigError
 
     formats = parse_formats(args.format)
+    if args.physics:  # a missing mujoco is said once, before any clip
+        from ..physics.model import import_mujoco
+
+        import_mujoco()
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be at least 1, got {args.workers}.")
     if os.path.exists(args.output) and not os.path.isdir(args.output):
