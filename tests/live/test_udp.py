@@ -39,17 +39,19 @@ def run_pair(
     record = tmp_path / "live.npz"
     # The robot's side: a socket drained by a thread, receiving the published commands.
     robot = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    robot.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
     robot.bind(("127.0.0.1", 0))
     robot.settimeout(0.2)
     received: list[bytes] = []
     done = threading.Event()
 
-    def drain() -> None:
-        while not done.is_set():
+    def drain() -> None:  # until `live` has exited and the socket stayed empty for 0.2 s
+        while True:
             try:
                 received.append(robot.recv(65536))
             except TimeoutError:
-                pass
+                if done.is_set():
+                    return
 
     reader = threading.Thread(target=drain, daemon=True)
     reader.start()
@@ -77,7 +79,6 @@ def run_pair(
     finally:
         if live.poll() is None:
             live.kill()
-        time.sleep(0.3)
         done.set()
         reader.join()
         robot.close()
@@ -128,7 +129,12 @@ def test_live_equals_offline_causal_run(tmp_path: Path, configs_dir: Path, mocap
     np.testing.assert_allclose(run["q"][live], q_ref[:k], rtol=0, atol=1e-6)
     # What the robot received over UDP: every tick once, in order, the same commands.
     pub = run["published"]
-    assert [c["tick"] for c in pub] == list(range(len(t)))
+    ticks = [c["tick"] for c in pub]
+    assert ticks == list(range(len(t))), (
+        len(ticks),
+        len(t),
+        sorted(set(range(len(t))) - set(ticks)),
+    )
     np.testing.assert_array_equal(np.array([c["q"] for c in pub]), run["q"])
     np.testing.assert_array_equal([c["t"] for c in pub], t)
     lat = rep["latency"]
