@@ -64,13 +64,14 @@ from ..motion.keypoints import (
     resolve_keypoint_map,
 )
 from ..motion.phases import SIDES, PhaseThresholds, SupportCommand, SupportPhaseDetector
-from ..motion.scaling import Scaler, limit_leg_extension
+from ..motion.scaling import Scaler
 from ..tasks.com import ComTask
 from ..tasks.frame import FrameTask
 from ..trajectory import RobotTrajectory
 from .binding import RobotBinding, waist_yaw
 from .feet import FootTargets
 from .record import RunRecorder, run_meta
+from .rooting import Rooting, anchors_points  # noqa: F401 (anchors_points re-exported)
 from .spec import (
     RetargetError,
     RetargetSpec,
@@ -427,17 +428,13 @@ class Retargeter:
             if self.support is not None and not static
             else None
         )
-        self._flight_root: tuple[np.ndarray, np.ndarray] | None = None
         self._foot_targets: FootTargets | None = None
         self._feet_warned = False
         self._first_targets: dict[str, tuple[np.ndarray | None, np.ndarray | None]] = {}
-        self._last_waist: tuple[np.ndarray, np.ndarray] | None = None
+        self._rooting: Rooting | None = None
         if self.support is not None:
             ctrl.set_contacts([fb.contact for fb in self.support.feet.values()])
         self._t_first: float | None = t0
-        self._root: str | None = None
-        self._last_anchors: dict[str, np.ndarray] = {}
-        self._blend: tuple[float, np.ndarray] | None = None
         self._targets_ref = {n: (p.copy(), R.copy()) for n, (p, R) in self.task_reference.items()}
 
     def _calibrate(self, samples: list[tuple[float, np.ndarray]]) -> None:
@@ -464,6 +461,11 @@ class Retargeter:
         self._leg_scale = robot_l / human_l if human_l > 0 else cal.root_scale
         if not math.isfinite(self._leg_scale):
             self._leg_scale = cal.root_scale
+        self._rooting = Rooting(
+            self.scaler, cal, self._leg_scale, self.leg_lengths,
+            blend_time=self.spec.blend_time, leg_extension=self.spec.leg_extension,
+            kinematic=self.stepper is not None,
+        )  # fmt: skip
         # Waist yaw at calibration (feet yaw fallback when the motion has no toes).
         first = unpacked[0]
         self._waist_yaw_cal = waist_yaw(first[0], first[1])
@@ -598,8 +600,6 @@ class Retargeter:
             use = [s for s in soles if support.get(s, True)] or list(on)
             root = "flight" if not use else "double" if len(use) == 2 else use[0]
             anchors = {s: self._fs.ankle_of(s, soles[s]) for s in use}
-            if root == "flight" and self._root != "flight" and self._last_waist is not None:
-                self._flight_root = self._last_waist
         elif self.sequencer is not None:
             on = self.sequencer.contacts
             root = "double" if len(on) == 2 else on[0]
@@ -610,55 +610,9 @@ class Retargeter:
             root = "double"
             anchors = {s: cal.robot_points[f"{s}_ankle"] for s in SIDES
                        if f"{s}_ankle" in cal.robot_points}  # fmt: skip
-        scaled = self._scale_from(human, root, anchors)
-        if self._root is not None and root != self._root and self.spec.blend_time > 0:
-            old = self._scale_from(human, self._root, self._last_anchors)
-            delta = old["waist"] - scaled["waist"]
-            previous = self._blend_offset(t)
-            if previous is not None:
-                delta = delta + previous
-            self._blend = (t, delta)
-        self._root = root
-        self._last_anchors = anchors
-        offset = self._blend_offset(t)
-        if offset is None:
-            self._blend = None
-        else:
-            scaled = {k: (v if k in anchors_points(anchors) else v + offset)
-                      for k, v in scaled.items()}  # fmt: skip
-        if self.leg_lengths and anchors and self._scl.method == "poubel":
-            scaled, _ = limit_leg_extension(
-                scaled, anchors, self.leg_lengths, self.spec.leg_extension
-            )
-        self._last_waist = (scaled["waist"].copy(), np.asarray(human["waist"], float).copy())
-        return scaled, anchors
-
-    def _scale_from(
-        self, human: Mapping[str, np.ndarray], root: str, anchors: Mapping[str, np.ndarray]
-    ) -> dict[str, np.ndarray]:
-        """Scale one sample from ``root`` (``double``/``left``/``right`` or ``flight``).
-
-        In flight the waist moves from where it left the ground like the person's, scaled by the
-        calibration's root scale, and the rest follows by Poubel 2014 eq. 1 from it.
-        """
-        cal = self._cal
-        if root == "flight" and self._flight_root is not None:
-            w_r, w_h = self._flight_root
-            waist = w_r + cal.root_scale * (cal.rotation @ (human["waist"] - w_h))
-            if np.all(np.isfinite(waist)):
-                return self._scl.scale_rooted(human, "waist", waist)
-        scaled = self._scl.scale(human, support=root, anchors=anchors)
-        if self.stepper is not None and root in SIDES and self._scl.method == "poubel":
-            # Kinematic single support: the pelvis height is the person's, scaled by the leg
-            # ratio (the chain from the support foot places it horizontally); the standing foot
-            # stays. (Double support keeps Poubel's mid-ankle to mid-hip loop.)
-            z = cal.robot_waist[2] + self._leg_scale * (human["waist"][2] - cal.human_waist[2])
-            dz = z - scaled["waist"][2]
-            if math.isfinite(dz):
-                fixed = anchors_points(anchors)
-                up = np.array([0.0, 0.0, dz])
-                scaled = {k: (v if k in fixed else v + up) for k, v in scaled.items()}
-        return scaled
+        if self._rooting is None:
+            raise RetargetError("not calibrated yet")
+        return self._rooting.scale(t, human, root, anchors), anchors
 
     def _step(
         self,
@@ -705,16 +659,6 @@ class Retargeter:
         s = (t - (t if self._t_first is None else self._t_first)) / self.spec.ramp_time
         return 1.0 if s >= 1 else s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
 
-    def _blend_offset(self, t: float) -> np.ndarray | None:
-        if self._blend is None:
-            return None
-        t0, delta = self._blend
-        s = (t - t0) / self.spec.blend_time
-        if s >= 1.0:
-            return None
-        w = 1.0 - s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
-        return w * delta
-
     # -------------------------------------------------------------------- output
     def trajectory(self) -> RobotTrajectory:
         """The run so far as a :class:`~qpretarget.trajectory.RobotTrajectory`.
@@ -734,11 +678,6 @@ class Retargeter:
             support_log=[] if log is None else log.log,
         )  # fmt: skip
         return rec.trajectory(human, meta)
-
-
-def anchors_points(anchors: Mapping[str, np.ndarray]) -> frozenset[str]:
-    """Foot key-points of the supporting sides (not moved by blending)."""
-    return frozenset(f"{s}_{p}" for s in anchors for p in ("ankle", "toe", "heel"))
 
 
 def retarget_motion(

@@ -1,0 +1,137 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""Where the scaled body is rooted each tick, and the blends between roots.
+
+The :class:`~qpretarget.retarget.Retargeter` chooses the root of the scaling each tick (the
+supporting feet, ``double``/``left``/``right``, or ``flight``) and the robot ankles it is anchored
+at; :class:`Rooting` scales the person from it (Poubel 2014 eq. 1,
+:class:`~qpretarget.motion.scaling.Scaler`) and keeps the body continuous:
+
+* when the root changes, the waist offset between the old and the new root's scaling decays
+  over ``scaling.blend_time`` (minimum jerk);
+* in flight (kinematic mode) the waist moves from where it left the ground like the person's,
+  times the calibration's root scale;
+* in kinematic single support the pelvis height is the person's times the leg-length ratio
+  (the chain from the support foot places it horizontally);
+* no supporting leg is stretched beyond ``scaling.leg_extension`` of its length
+  (:func:`~qpretarget.motion.scaling.limit_leg_extension`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..motion.calibration import Calibration
+from ..motion.phases import SIDES
+from ..motion.scaling import Scaler, limit_leg_extension
+
+
+def anchors_points(anchors: Mapping[str, np.ndarray]) -> frozenset[str]:
+    """Foot key-points of the supporting sides (not moved by blending)."""
+    return frozenset(f"{s}_{p}" for s in anchors for p in ("ankle", "toe", "heel"))
+
+
+class Rooting:
+    """Scaling from a root that changes over the run (see the module docstring).
+
+    Args:
+        scaler: The run's scaler.
+        calibration: The run's calibration.
+        leg_scale: Leg-length ratio robot / person.
+        leg_lengths: side -> robot leg length [m].
+        blend_time: ``scaling.blend_time`` [s].
+        leg_extension: ``scaling.leg_extension``.
+        kinematic: The kinematic balance mode (pelvis height from the person in single
+            support).
+    """
+
+    def __init__(
+        self,
+        scaler: Scaler,
+        calibration: Calibration,
+        leg_scale: float,
+        leg_lengths: Mapping[str, float],
+        *,
+        blend_time: float,
+        leg_extension: float,
+        kinematic: bool,
+    ) -> None:
+        self.scaler = scaler
+        self.calibration = calibration
+        self.leg_scale = leg_scale
+        self.leg_lengths = dict(leg_lengths)
+        self.blend_time = blend_time
+        self.leg_extension = leg_extension
+        self.kinematic = kinematic
+        self.root: str | None = None
+        self.last_anchors: dict[str, np.ndarray] = {}
+        self.blend: tuple[float, np.ndarray] | None = None
+        self.flight_root: tuple[np.ndarray, np.ndarray] | None = None
+        self.last_waist: tuple[np.ndarray, np.ndarray] | None = None
+
+    def scale(
+        self,
+        t: float,
+        human: Mapping[str, np.ndarray],
+        root: str,
+        anchors: dict[str, np.ndarray],
+    ) -> dict[str, np.ndarray]:
+        """Scaled key-points of one sample rooted at ``root`` / ``anchors``, blended."""
+        if root == "flight" and self.root != "flight" and self.last_waist is not None:
+            self.flight_root = self.last_waist
+        scaled = self.scale_from(human, root, anchors)
+        if self.root is not None and root != self.root and self.blend_time > 0:
+            old = self.scale_from(human, self.root, self.last_anchors)
+            delta = old["waist"] - scaled["waist"]
+            previous = self.blend_offset(t)
+            if previous is not None:
+                delta = delta + previous
+            self.blend = (t, delta)
+        self.root = root
+        self.last_anchors = anchors
+        offset = self.blend_offset(t)
+        if offset is None:
+            self.blend = None
+        else:
+            scaled = {k: (v if k in anchors_points(anchors) else v + offset)
+                      for k, v in scaled.items()}  # fmt: skip
+        if self.leg_lengths and anchors and self.scaler.method == "poubel":
+            scaled, _ = limit_leg_extension(scaled, anchors, self.leg_lengths, self.leg_extension)
+        self.last_waist = (scaled["waist"].copy(), np.asarray(human["waist"], float).copy())
+        return scaled
+
+    def scale_from(
+        self, human: Mapping[str, np.ndarray], root: str, anchors: Mapping[str, np.ndarray]
+    ) -> dict[str, np.ndarray]:
+        """Scale one sample from ``root`` (``double``/``left``/``right`` or ``flight``)."""
+        cal = self.calibration
+        if root == "flight" and self.flight_root is not None:
+            w_r, w_h = self.flight_root
+            waist = w_r + cal.root_scale * (cal.rotation @ (human["waist"] - w_h))
+            if np.all(np.isfinite(waist)):
+                return self.scaler.scale_rooted(human, "waist", waist)
+        scaled = self.scaler.scale(human, support=root, anchors=anchors)
+        if self.kinematic and root in SIDES and self.scaler.method == "poubel":
+            z = cal.robot_waist[2] + self.leg_scale * (human["waist"][2] - cal.human_waist[2])
+            dz = z - scaled["waist"][2]
+            if math.isfinite(dz):
+                fixed = anchors_points(anchors)
+                up = np.array([0.0, 0.0, dz])
+                scaled = {k: (v if k in fixed else v + up) for k, v in scaled.items()}
+        return scaled
+
+    def blend_offset(self, t: float) -> np.ndarray | None:
+        """The waist offset still to blend out at ``t`` (``None`` when none)."""
+        if self.blend is None:
+            return None
+        t0, delta = self.blend
+        s = (t - t0) / self.blend_time
+        if s >= 1.0:
+            return None
+        w = 1.0 - s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
+        return w * delta
+
+
+__all__ = ["Rooting", "anchors_points"]
