@@ -204,6 +204,13 @@ def _print_physics(m: dict) -> None:
         f"  saturation     {sat['frames']} frames ({sat['fraction'] * 100:.1f} %)",
         "  feet share     " + ("-" if share is None else f"{share * 100:.1f} % of body weight"),
     ]
+    z = m.get("reference_zmp")
+    if z is not None:
+        first = "" if z["first_outside_s"] is None else f", first at {z['first_outside_s']:.2f} s"
+        lines.append(
+            f"  reference ZMP  outside the stance soles in {z['frames_outside']} of "
+            f"{z['stance_frames']} stance frames{first}"
+        )
     if "assisted" in m:
         a = m["assisted"]["assist"]
         lines.append(

@@ -188,7 +188,6 @@ def summarize(
     pm: Any,
     *,
     per_frame: bool = False,
-    zmp_margin: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """The metrics of an unassisted replay and, optionally, an assisted one.
 
@@ -197,9 +196,10 @@ def summarize(
         assisted: the same run replayed with the virtual root wrench, or ``None``.
         pm: the :class:`~qpretarget.physics.model.PhysicsModel` (its assumptions are recorded).
         per_frame: add the per-frame series (lists, ``null`` where not simulated).
-        zmp_margin: the reference ZMP's signed margin per frame
-            (:func:`~qpretarget.physics.zmp.reference_zmp_margin`), summarized as
-            ``reference_zmp`` (a kinematic diagnostic of the run, not simulated).
+
+    The unassisted series' ``ref_zmp_margin`` (set by
+    :func:`~qpretarget.physics.replay.check_run`), when present, is summarized as
+    ``reference_zmp`` (a kinematic diagnostic of the run, not simulated).
     """
     out: dict[str, Any] = {
         "thresholds": {
@@ -215,14 +215,11 @@ def summarize(
     out["verdict"] = verdict(out["unassisted"])
     if assisted is not None:
         out["assisted"] = _replay_block(assisted)
+    zmp_margin = getattr(free, "ref_zmp_margin", None)
     if zmp_margin is not None:
         out["reference_zmp"] = zmp_block(np.asarray(zmp_margin, float), free.t, free.fallen_at)
     if per_frame:
         out["per_frame"] = per_frame_series(free, assisted)
-        if zmp_margin is not None:
-            out["per_frame"]["reference_zmp_margin_mm"] = [
-                _f(x * 1e3) for x in np.asarray(zmp_margin, float)
-            ]
     return out
 
 
@@ -243,6 +240,9 @@ def per_frame_series(free: Any, assisted: Any | None) -> dict[str, Any]:
         "saturated_joints": [int(x) for x in np.count_nonzero(free.saturated, axis=1)],
         "feet_weight_share": lst(feet_share_per_frame(free)),
     }
+    zmp_margin = getattr(free, "ref_zmp_margin", None)
+    if zmp_margin is not None:
+        out["reference_zmp_margin_mm"] = lst(zmp_margin, 1e3)
     if assisted is not None:
         out["assisted_force_bw_pct"] = lst(assisted.assist_force / assisted.weight * 100.0)
         out["assisted_torque_Nm"] = lst(assisted.assist_torque)

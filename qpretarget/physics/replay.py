@@ -70,6 +70,8 @@ class ReplaySeries:
         ref_contacts: (T, F) the run's supporting feet.
         floor_height: floor placement [m] (lowest collision point in the first frame).
         wall_time_s: time the replay took; sim_time_s: simulated time.
+        ref_zmp_margin: (T,) the reference ZMP's signed margin to the stance soles [m]
+            (:func:`~qpretarget.physics.zmp.reference_zmp_margin`), set by :func:`check_run`.
     """
 
     t: np.ndarray
@@ -96,6 +98,7 @@ class ReplaySeries:
     wall_time_s: float = 0.0
     sim_time_s: float = 0.0
     contacts_assumed: bool = False
+    ref_zmp_margin: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -503,7 +506,6 @@ def check_run(
         if assisted
         else None
     )
-    zmp_margin = None
     if pm.robot is not None:
         from .zmp import reference_zmp_margin
 
@@ -519,4 +521,5 @@ def check_run(
         zmp_margin = reference_zmp_margin(
             robot, np.asarray(traj.t, float), q, v, free.ref_contacts, free.floor_height
         )[1]
-    return summarize(free, helped, pm, zmp_margin=zmp_margin), free, helped
+        free.ref_zmp_margin = zmp_margin
+    return summarize(free, helped, pm), free, helped
