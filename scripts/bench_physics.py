@@ -108,14 +108,15 @@ def main() -> None:
     rows, factors = {}, []
     print(
         "| clip | s | verdict | survived | sat. frames | root p95 mm | joint RMS deg "
-        "| feet share | assist F p95 %BW | horiz. p95 %BW | assist n p95 N m | x real time |"
+        "| feet share | assist F p95 %BW | horiz. p95 %BW | assist n p95 N m "
+        "| ref. ZMP out (first s) | x real time |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---" * 13 + "|")
     for clip in args.clips:
         controller.reset()
         motion = load_motion(clip)
         if args.end is not None:
-            motion = motion.slice(0.0, args.end) if hasattr(motion, "slice") else motion
+            motion = motion.slice(0.0, args.end)
         run = Retargeter(controller).retarget(motion, progress=False)
         t0 = time.perf_counter()
         m, free, helped = check_run(run, pm=pm, feedforward=args.feedforward)
@@ -124,12 +125,16 @@ def main() -> None:
         dur = float(run.t[-1] - run.t[0])
         factors.append(2 * dur / wall)  # two replays per clip
         rows[Path(clip).name] = {"row": r, "metrics": m, "duration_s": dur}
+        z = m.get("reference_zmp", {})
+        first = z.get("first_outside_s")
+        zmp = f"{z.get('frames_outside', '-')}" + ("" if first is None else f" ({first:.2f})")
         print(
             f"| {Path(clip).stem} | {dur:.1f} | {r['verdict']} | {r['survived'] * 100:.0f} % | "
             f"{r['saturated_frames']} | {r['root_pos_p95_mm']:.0f} | {r['joint_rms_deg']:.2f} | "
             f"{r['feet_share'] * 100:.0f} % | {r['assist_force_p95_bw_pct']:.1f} | "
             f"{r['assist_horizontal_p95_bw_pct']:.1f} | "
-            f"{r['assist_torque_p95_Nm']:.1f} | {r['real_time_factor']:.0f} |",
+            f"{r['assist_torque_p95_Nm']:.1f} | {zmp} | "
+            f"{r['real_time_factor']:.0f} |",
             flush=True,
         )
     f = np.array(factors)
