@@ -103,7 +103,9 @@ def offline_reference(config: Path, frames: np.ndarray, rotations: np.ndarray) -
 def test_live_equals_offline_causal_run(tmp_path: Path, configs_dir: Path, mocap_dir: Path):
     config = configs_dir / "g1_whole_body.yaml"
     clip = mocap_dir / "cmu_131_04_dance_spin.bvh"
-    run = run_pair(tmp_path, config, clip, ["--end", "2.5"], max_wait_ms=500)
+    # A sender late by up to 5 s (a stalled test machine) is waited for, never extrapolated:
+    # the comparison with the offline run needs every frame as it was sent.
+    run = run_pair(tmp_path, config, clip, ["--end", "2.5"], max_wait_ms=5000)
     rep = run["report"]
     assert rep["source"]["malformed"] == 0
     # The frames that arrived are the clip's segments through float32, bit for bit.
