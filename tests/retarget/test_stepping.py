@@ -127,6 +127,17 @@ def test_the_robot_walks_with_the_person(clip):
     assert m["held_ticks"] == 0
 
 
+def test_talos_walks_with_the_person_too():
+    ctrl = Controller.from_yaml(REPO / "configs" / "talos_whole_body.yaml")
+    traj = Retargeter(ctrl).retarget(load_motion(MOCAP / "cmu_16_15_walk.bvh"))
+    m = human_metrics(traj, ctrl.robot)
+    # Same acceptance as G1's on the walk (measured: 7/7 steps, travel 0.93, slip 0.41 mm).
+    assert m["steps_total"]["robot"] == m["steps_total"]["human"] >= 6
+    assert abs(m["root_travel"]["ratio"] - 1.0) <= 0.10
+    assert m["stance_slip_mm"]["max"] < 1.0 and m["sole_below_ground_mm"] < 2.0
+    assert _limit_overshoot(traj, ctrl.robot) <= 1e-9
+
+
 def test_the_robot_stands_on_one_leg_when_the_person_does():
     traj, m, ctrl = _run("cmu_49_18_one_leg_balance.bvh")
     # Whenever the person's foot is up (>= 3 cm), the robot's is off the ground: 99 % measured
