@@ -201,7 +201,9 @@ class SupportPhaseDetector:
                 self._pending[side] = None
         self._t_prev = t
         left_on, right_on = self._support["left"], self._support["right"]
-        self.flight = not (left_on or right_on)
+        # Flight needs both feet up, not only moving fast: feet sliding on the floor (a dance)
+        # leave support by speed while still at the floor.
+        self.flight = not (left_on or right_on) and min(self.height.values()) > th.height_on
         if left_on and right_on:
             self.phase = "double"
         elif left_on:

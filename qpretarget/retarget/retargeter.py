@@ -642,7 +642,9 @@ class Retargeter:
             desired, scaled, kp, soles, stepper.contacts, self.detector.height, stepper.ground
         )
         before = dict(stepper.states)
-        cmd = stepper.update(t, self.detector.feet, soles, desired, human_foot)
+        cmd = stepper.update(
+            t, self.detector.feet, soles, desired, human_foot, flight=self.detector.flight
+        )
         for side in SIDES:
             if before[side] == "swing" and cmd.states[side] != "swing":
                 ft.touched_down(side, kp)

@@ -195,6 +195,7 @@ class KinematicStepper:
         soles: Mapping[str, pin.SE3],
         desired: Mapping[str, pin.SE3],
         human_foot: Mapping[str, tuple[float, np.ndarray] | None],
+        flight: bool | None = None,
     ) -> StepCommand:
         """Advance every foot by one tick.
 
@@ -205,6 +206,8 @@ class KinematicStepper:
             desired: side -> sole pose from the scaled person (scaled ankle, foot yaw, flat).
             human_foot: side -> ``(yaw [rad], scaled ankle position (3,))`` of the person's foot,
                 or ``None`` when unknown (no pivots then).
+            flight: The person is in flight (both feet up; default: neither foot in support).
+                Only then may both robot feet leave the ground.
 
         Returns:
             The :class:`StepCommand` of this tick.
@@ -213,7 +216,8 @@ class KinematicStepper:
             self.reset(t, soles, human_foot)
         st = self.settings
         before = self.contacts
-        flight = not any(human_support.get(s, True) for s in SIDES)
+        if flight is None:
+            flight = not any(human_support.get(s, True) for s in SIDES)
         anchors: dict[str, pin.SE3] = {}
         for side in SIDES:
             state = self.states[side]
