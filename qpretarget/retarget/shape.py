@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -364,7 +364,7 @@ def retarget_motion(
     shape = shape_task(controller, task)
     if q0 is not None:
         controller.reset(np.asarray(q0, dtype=float))
-    poses = list(sources)
+    poses: list[Any] = list(cast(Any, sources))
     T = len(poses)
     nq = controller.robot.nq
     q = np.zeros((T, nq))
