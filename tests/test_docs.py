@@ -297,6 +297,11 @@ CHANGES: dict[tuple[str, str, str], tuple[dict[str, Any], Any]] = {
     ("constraints", "self_collision", "links"): ({"entry": AUTO_PAIRS}, ["left_wrist_yaw_link",
                                                                          "pelvis_contour_link"]),
     ("constraints", "self_collision", "exclude"): ({}, COLLISION_PAIRS[:3]),
+    ("constraints", "self_collision", "include"): (
+        {"entry": {"pairs": "auto"}}, [["torso_link", "left_shoulder_roll_link"],
+                                       ["left_wrist_roll_link", "left_wrist_yaw_link"]]),
+    ("constraints", "self_collision", "rest_fraction"): ({"entry": AUTO_PAIRS}, 1.0),
+    ("constraints", "self_collision", "trust_gap_fraction"): ({"entry": AUTO_PAIRS}, 0.0),
     ("constraints", "self_collision", "touch_distance"): (
         {"entry": {**AUTO_PAIRS, "d_s": 0.02, "d_i": 0.1}}, 0.1),
     ("constraints", "self_collision", "max_rows"): ({}, 1),
@@ -335,6 +340,8 @@ NO_EFFECT: dict[tuple[str, str, str], str] = {
     "value that fits the hull gives the same polygon (a smaller one is a ConfigError)",
     ("constraints", "self_collision", "use_srdf"): "G1 ships no SRDF, so there are no disabled "
     "pairs to leave out (Talos/Romeo/iCub have some)",
+    ("constraints", "self_collision", "optional"): "G1 has collision geometry: it only matters on "
+    "a robot without (tests/constraints/test_self_collision.py)",
 }  # fmt: skip
 
 #: Documented keys that should change the motion but do not (a bug to fix in the code): the test

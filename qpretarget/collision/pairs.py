@@ -153,6 +153,7 @@ def select_pairs(
     use_srdf: bool = True,
     geometry: str = "convex_hull",
     neighbour_distance: float = 0.0,
+    links: Sequence[str] | None = None,
     path: str = "pairs",
 ) -> PairSelection:
     r"""Every pair of bodies that can collide (``pairs: auto``), with the reasons for the rest.
@@ -169,6 +170,8 @@ def select_pairs(
         neighbour_distance: chain neighbours (two joints apart in one limb) closer than this in
             the reference posture are left out [m]: their hulls sit close by construction, and
             a damper on them would lock the joint between them (``0``: keep them all).
+        links: restrict the candidates to pairs of these bodies (adjacency is still judged
+            on every body with geometry).
         path: YAML path for error messages.
 
     Returns:
@@ -177,7 +180,7 @@ def select_pairs(
     Raises:
         UnknownNameError: an ``include``/``exclude`` pair names an unknown body (close names).
     """
-    names = list(shapes)
+    names = list(shapes) if links is None else [n for n in shapes if n in set(links)]
     inc = {_key(*p) for p in _check_names(include, names, f"{path}.include")}
     exc = {_key(*p) for p in _check_names(exclude, names, f"{path}.exclude")}
     parents = list(robot.model.parents)

@@ -694,13 +694,13 @@ class SelfCollision(DistanceDamper):
         and touching pairs, and chain neighbours already within :math:`d_i` at rest; the
         ``include:`` pairs come back whatever the rules say. The reasons go to :attr:`left_out`.
         """
+        links: list[str] | None = None
         if self._links_spec is not None:
-            links: list[str] = []
+            links = []
             for k, name in enumerate(self._links_spec):
                 link = resolve_link(robot, shapes, name, f"{p}links[{k}]")
                 if link not in links:
                     links.append(link)
-            shapes = {n: shapes[n] for n in shapes if n in links}
         include = [
             [resolve_link(robot, shapes, str(x), f"{p}include[{k}]") for x in pair]
             for k, pair in enumerate(self._include)
@@ -708,7 +708,7 @@ class SelfCollision(DistanceDamper):
         sel = select_pairs(
             robot, shapes, contact_margin=self.touch_distance, include=include,
             exclude=[sorted(e) for e in exclude], use_srdf=self.use_srdf,
-            geometry=self.geometry, neighbour_distance=self.d_i, path=f"{p}pairs",
+            geometry=self.geometry, neighbour_distance=self.d_i, links=links, path=f"{p}pairs",
         )  # fmt: skip
         for pair, why in sel.excluded.items():
             self.left_out.setdefault(why.split(" (")[0], []).append(pair)
