@@ -3,10 +3,16 @@
 
 G1 posed by known joint motion, rendered at full Kinect V2 resolution 2.3 m away (about 7,000
 points, voxel-averaged and subsampled to 2,500), 5 mm noise, 5 % outliers; every frame is
-tracked from the previous ones (AR prediction) as in a live run. Prints median / p95 time per
-frame, iterations and the E-step's share, with the machine and versions.
+tracked from the previous ones (AR prediction) as in a live run. Prints median / p95 / p99 time
+per frame and iterations, with the machine and versions (``--profile N``: the E-step's share and
+the N costliest functions; the run is then profiled, and its times are slower).
+
+With ``--clip`` the human model follows a mocap clip at 30 Hz instead (the issue's figure: CMU
+14_37 drink, 2,500 cloud points), fitted with the shipped ``configs/cloud_g1.yaml`` (calibration
+and joint-centre learning on); the calibration frame is not counted.
 
     python scripts/bench_cloud.py [--frames 60] [--json out.json]
+    python scripts/bench_cloud.py --clip ../shared/data/mocap/cmu_14_37_drink_soda.bvh
 """
 
 from __future__ import annotations
@@ -28,6 +34,10 @@ def main() -> None:
     )
     ap.add_argument("--frames", type=int, default=60, help="frames at 30 Hz (default 60 = 2 s)")
     ap.add_argument("--json", help="write the numbers here")
+    ap.add_argument("--clip", help="mocap clip the human model follows (default: posed G1)")
+    ap.add_argument("--config", default=None, help="cloud config (with --clip; default shipped)")
+    ap.add_argument("--profile", type=int, default=0, help="print the N costliest functions")
+    ap.add_argument("--rate", type=float, default=30.0, help="clip frames per second (--clip)")
     args = ap.parse_args()
 
     import proxsuite
@@ -47,35 +57,80 @@ def main() -> None:
 
     g1 = qp.load_robot("g1")
     meshes = load_link_meshes(g1.model, g1.urdf_path)
-    t = np.arange(args.frames) / 30.0
-    cam = kinect_camera([2.3, 0.4, 1.1], [0.0, 0.0, 0.65], downscale=1)
+    t = np.arange(args.frames) / args.rate
     t0 = time.perf_counter()
-    syn = render_sequence(g1.model, meshes, g1_truth(g1, t), t, cam)
-    render_s = (time.perf_counter() - t0) / len(t)
+    if args.clip:
+        from qpretarget.cloud.config import CloudConfig
+        from qpretarget.cloud.render import clip_cloud_sequence
+
+        syn, poser = clip_cloud_sequence(
+            args.clip, rate=args.rate, duration=(args.frames - 1) / args.rate
+        )
+        config_path = args.config or os.path.join(
+            os.path.dirname(__file__), "..", "configs", "cloud_g1.yaml"
+        )
+        cfg = CloudConfig.from_yaml(config_path)
+    else:
+        cam = kinect_camera([2.3, 0.4, 1.1], [0.0, 0.0, 0.65], downscale=1)
+        syn = render_sequence(g1.model, meshes, g1_truth(g1, t), t, cam)
+        cfg = {"robot": "g1", "stability": {"mode": "qp"}, "calibration": {"enabled": False}}
+    render_s = (time.perf_counter() - t0) / len(syn.q)
     t0 = time.perf_counter()
-    template = Template(g1, n_points=5000, meshes=meshes, link_density_exponent=0.5)
+    if args.clip:  # the config's template
+        rt = CloudRetargeter(cfg, robot=g1)
+    else:
+        template = Template(g1, n_points=5000, meshes=meshes, link_density_exponent=0.5)
+        rt = CloudRetargeter(cfg, robot=g1, template=template)
     template_s = time.perf_counter() - t0
-    cfg = {"robot": "g1", "stability": {"mode": "qp"}, "calibration": {"enabled": False}}
-    rt = CloudRetargeter(cfg, robot=g1, template=template)
-    prof = cProfile.Profile()
-    prof.enable()
-    _, results = rt.run(syn.sequence)
-    prof.disable()
+    prof = cProfile.Profile() if args.profile else None  # the profiler slows the run down
+    if prof is not None:
+        prof.enable()
+    cpu = [time.thread_time()]  # CPU time of this thread per frame: what other load can't add
+
+    def tick(_i: int, _r: object) -> None:
+        cpu.append(time.thread_time())
+
+    traj, results = rt.run(syn.sequence, callback=tick)
+    if prof is not None:
+        prof.disable()
     times = np.array([r.time for r in results[1:]])  # the first frame starts from afar
     iters = np.array([r.iterations for r in results[1:]])
-    stats = pstats.Stats(prof)
-    estep = sum(v[3] for k, v in stats.stats.items() if k[2] == "e_step")
-    total = sum(r.time for r in results)
+    if args.clip:  # the docs' arm-direction error (qpretarget.cloud.measures)
+        from qpretarget.cloud.measures import (
+            ARM_SEGMENTS,
+            arm_direction_errors,
+            longest_run_above,
+        )
+
+        err = arm_direction_errors(g1, traj.q, poser, syn.q)
+        arms = {
+            "arm_direction_deg_worst": float(err.max()),
+            "arm_direction_deg_per_segment": dict(
+                zip(ARM_SEGMENTS, np.round(err.max(axis=0), 2).tolist(), strict=True)
+            ),
+            "arm_direction_deg_median": float(np.median(err)),
+            "seconds_above_45deg_longest": longest_run_above(err, syn.sequence.t, 45.0),
+            "frames_not_ok": int(sum(r.status != "ok" for r in results)),
+        }
+    estep_share = None
+    if prof is not None:
+        stats = pstats.Stats(prof)
+        estep = sum(v[3] for k, v in stats.stats.items() if k[2] == "e_step")
+        estep_share = float(estep / sum(r.time for r in results))
     out = {
+        "input": args.clip or "G1 posed by known joint motion",
         "frames": len(results),
         "cloud_points_rendered": int(np.median([len(f.points) for f in syn.sequence])),
         "cloud_points_fitted": 2500,
-        "template_points": template.n_points,
+        "template_points": rt.template.n_points,
         "ms_per_frame_median": 1000 * float(np.median(times)),
         "ms_per_frame_p95": 1000 * float(np.percentile(times, 95)),
+        "ms_per_frame_p99": 1000 * float(np.percentile(times, 99)),
+        "cpu_ms_per_frame_median": 1000 * float(np.median(np.diff(cpu)[1:])),
+        "cpu_ms_per_frame_p95": 1000 * float(np.percentile(np.diff(cpu)[1:], 95)),
         "iterations_median": float(np.median(iters)),
         "ms_per_iteration": 1000 * float(times.sum() / iters.sum()),
-        "estep_share": float(estep / total),
+        "estep_share_profiled": estep_share,
         "template_build_s": template_s,
         "render_s_per_frame": render_s,
         "machine": f"{platform.machine()} {os.cpu_count()} cpu, load {os.getloadavg()[0]:.2f}",
@@ -86,7 +141,11 @@ def main() -> None:
         },
         "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
     }
+    if args.clip:
+        out.update(arms)
     print(json.dumps(out, indent=2))
+    if prof is not None:
+        stats.sort_stats("tottime").print_stats(args.profile)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=2)

@@ -117,6 +117,10 @@ class CalibrationConfig:
             most, which come later, can still move an estimate the first frames made).
         centre_axes: ``limb``: each articulation's centre moves along its limb only (the line
             a straight limb does not show); ``free``: in 3-D.
+        centre_rate: the centre stage runs on at most this many frames per second [Hz] (the
+            others track the pose alone; null: every frame). ``centre_information`` counts a
+            frame's information as if frames came at 10 Hz; at 30 Hz consecutive frames show
+            nearly the same bends, and running on each would count them three times.
     """
 
     enabled: bool = True
@@ -136,6 +140,7 @@ class CalibrationConfig:
     centre_bound: float = 0.15
     centre_information: float = 0.1
     centre_axes: str = "limb"
+    centre_rate: float | None = 10.0
 
 
 @dataclass
@@ -411,6 +416,11 @@ class CloudConfig:
                 ) from None
         if st.margin < 0:
             raise ConfigError("must be >= 0 [m].", path="stability.margin")
+        if cal.centre_rate is not None and not float(cal.centre_rate) > 0:
+            raise ConfigError(
+                f"must be > 0 [Hz] or null (every frame), got {cal.centre_rate!r}.",
+                path="calibration.centre_rate",
+            )
 
 
 __all__ = [

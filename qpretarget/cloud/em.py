@@ -313,6 +313,7 @@ def _kdtree_sums(
     from scipy.spatial import cKDTree
 
     N = len(B)
+    d2: np.ndarray | None = None
     if pairs is None:
         k = int(min(neighbors, len(A)))
         dist, nb = cKDTree(A).query(B, k=k)
@@ -320,24 +321,22 @@ def _kdtree_sums(
             dist, nb = dist[:, None], nb[:, None]
         pairs = idx_act[nb]
         d2 = dist * dist
-    else:
+    if d2 is None:
         k = pairs.shape[1]
         diff = B[:, None, :] - Afull[pairs]
         d2 = np.einsum("nka,nka->nk", diff, diff)
     logp, post = _log_posteriors(d2 * (-0.5 / sigma2), *log_in_out)
     nll = -float(logp.sum())
     w = post.sum(axis=1)
-    m = pairs.reshape(-1)
-    pf = post.reshape(-1)
-    P1 = np.bincount(m, pf, Mtot)
-    rep = np.repeat(np.arange(N), k)
-    Px = np.stack([np.bincount(m, pf * S[rep, c], Mtot) for c in range(3)], axis=1)
-    Pn = None
-    wN2 = 0.0
-    if use_n:
-        n2 = np.einsum("na,na->n", Sn, Sn)
-        Pn = np.stack([np.bincount(m, pf * Sn[rep, c], Mtot) for c in range(3)], axis=1)
-        wN2 = float(w @ n2)
+    # P1, Px (and Pn) in one sparse product: P^T [1 S Sn] with P the (N, Mtot) posteriors.
+    from scipy.sparse import csr_matrix
+
+    P = csr_matrix((post.reshape(-1), pairs.reshape(-1), np.arange(0, N * k + 1, k)), (N, Mtot))
+    cols = [np.ones((N, 1)), S] + ([Sn] if use_n else [])
+    R = np.asarray(P.T @ np.hstack(cols))
+    P1, Px = R[:, 0], R[:, 1:4]
+    Pn = R[:, 4:7] if use_n else None
+    wN2 = float(w @ np.einsum("na,na->n", Sn, Sn)) if use_n else 0.0
     s2 = np.einsum("na,na->n", S, S)
     return (nll, P1, Px, Pn, float(w @ s2), wN2, float(w.sum())), pairs
 
@@ -530,6 +529,7 @@ class CloudRetargeter:
         self._hip_memory = HipRuleState()
         self._planted: tuple[str, pin.SE3] | None = None
         self._anchors: dict[str, tuple[np.ndarray, float]] = {}
+        self._centre_time: float | None = None  # time of the last frame with a centre stage
         if self.stability_mode != "none":
             self.tracker.reset()
         self._solver.reset()
@@ -554,6 +554,19 @@ class CloudRetargeter:
         raise ConfigError(
             f"must be a number or {{segment: scale}}, got {spec!r}.", path="calibration.scales"
         )
+
+    def _centre_due(self, frame: CloudFrame | np.ndarray) -> bool:
+        """Whether this frame gets a centre stage (``calibration.centre_rate``); records it."""
+        rate = self.config.calibration.centre_rate
+        t = frame.t if isinstance(frame, CloudFrame) else None
+        if rate is None or t is None or not math.isfinite(t):
+            return True
+        last = self._centre_time
+        # Half a frame's slack at 30 Hz input: 10 Hz keeps every third frame.
+        if last is not None and t - last < 1.0 / float(rate) - 1e-3:
+            return False
+        self._centre_time = float(t)
+        return True
 
     @property
     def _estimate_centres(self) -> bool:
@@ -828,14 +841,16 @@ class CloudRetargeter:
         active: np.ndarray,
         iterations: int,
         log: list[IterationLog],
+        neighbours: _Neighbours | None = None,
     ) -> tuple[np.ndarray, float, float]:
+        """EM iterations of one stage (``neighbours``: kd-tree pairs shared with other stages)."""
         em = self.config.em
         T = self.template
         lam = em.normal_weight if stage == "refine" else 0.0
         ell = em.normal_scale
         use_rows = self.stability_mode == "qp"
         nll = np.nan
-        neighbours = _Neighbours(self)
+        neighbours = neighbours if neighbours is not None else _Neighbours(self)
         eta = 1.0
         for _ in range(iterations):
             posed = T.pose(q)
@@ -935,6 +950,7 @@ class CloudRetargeter:
         q_prev: np.ndarray | None,
         active: np.ndarray,
         log: list[IterationLog],
+        neighbours: _Neighbours | None = None,
     ) -> tuple[np.ndarray, float]:
         r"""EM on the pose and the joint-centre offsets together, then the centres' update.
 
@@ -961,7 +977,7 @@ class CloudRetargeter:
         qp = self._qp_centres
         e = self._centre_mean.copy() if self._centre_x is None else self._centre_x.copy()
         blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        neighbours = _Neighbours(self)
+        neighbours = neighbours if neighbours is not None else _Neighbours(self)
         for _ in range(cal.centre_iterations):
             posed = T.pose(q)
             est = neighbours.e_step(S, posed, active, sigma2)
@@ -1098,9 +1114,19 @@ class CloudRetargeter:
         self._centre_info = self._centre_info + self.config.calibration.centre_information * info
         self._centre_mean = e.copy()
 
-    def final_nll(self, S: np.ndarray, q: np.ndarray, sigma2: float, active: np.ndarray) -> float:
-        """Eq. 3 at ``q`` (same E-step mode as the fit)."""
-        return self._e_step(S, self.template.pose(q, jacobians=False), active, sigma2).nll
+    def final_nll(
+        self,
+        S: np.ndarray,
+        q: np.ndarray,
+        sigma2: float,
+        active: np.ndarray,
+        neighbours: _Neighbours | None = None,
+    ) -> float:
+        """Eq. 3 at ``q`` (same E-step mode as the fit; ``neighbours``: the fit's kept pairs)."""
+        posed = self.template.pose(q, jacobians=False)
+        if neighbours is not None:
+            return neighbours.e_step(S, posed, active, sigma2).nll
+        return self._e_step(S, posed, active, sigma2).nll
 
     # ------------------------------------------------------------------ calibration
     def _initial_pose(self, S: np.ndarray) -> np.ndarray:
@@ -1461,8 +1487,11 @@ class CloudRetargeter:
                 if not ok:
                     status = "relaxed"
         active = self._active(self.template.pose(q, jacobians=False))
+        # One set of kd-tree pairs for the position stages of the frame (searched again when
+        # stale, _kept_pairs): the cloud and the active points are the same throughout.
+        neighbours = _Neighbours(self)
         q, sigma2, _ = self._em_stage(
-            "linear", S, Sn, q, sigma2, q_prev, active, em.max_iterations, log
+            "linear", S, Sn, q, sigma2, q_prev, active, em.max_iterations, log, neighbours
         )
         for p in range(1, em.visibility_passes):
             # The visible template points depend on the pose: recompute them at the fit and go on
@@ -1471,12 +1500,22 @@ class CloudRetargeter:
             if np.array_equal(new_active, active):
                 break
             active = new_active
+            neighbours = _Neighbours(self)
             q, sigma2, _ = self._em_stage(
-                f"linear{p + 1}", S, Sn, q, sigma2, q_prev, active, em.max_iterations, log
+                f"linear{p + 1}",
+                S,
+                Sn,
+                q,
+                sigma2,
+                q_prev,
+                active,
+                em.max_iterations,
+                log,
+                neighbours,
             )
-        if self._estimate_centres and q_prev is not None:
-            q, sigma2 = self._centre_stage(S, q, sigma2, q_prev, active, log)
-        nll = self.final_nll(S, q, sigma2, active)
+        if self._estimate_centres and q_prev is not None and self._centre_due(frame):
+            q, sigma2 = self._centre_stage(S, q, sigma2, q_prev, active, log, neighbours)
+        nll = self.final_nll(S, q, sigma2, active, neighbours)
         if em.refine_iterations and Sn is not None:
             q, sigma2, _ = self._em_stage(
                 "refine", S, Sn, q, sigma2, q_prev, active, em.refine_iterations, log

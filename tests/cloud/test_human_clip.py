@@ -20,6 +20,7 @@ import pytest
 
 from qpretarget.cloud.config import CloudConfig
 from qpretarget.cloud.em import CloudRetargeter
+from qpretarget.cloud.measures import arm_direction_errors
 from qpretarget.cloud.render import human_clip_sequence
 from qpretarget.constraints.support_polygon import convex_hull_2d
 from qpretarget.motion import load_motion
@@ -83,27 +84,7 @@ def direction_errors(g1, human_run) -> np.ndarray:
     floor; a fit whose feet are tilted or twisted shows here as a leaning or turned robot.
     """
     syn, poser, _, traj, _ = human_run
-    model = g1.model
-    data = model.createData()
-    keys = ["shoulder", "elbow", "wrist"]
-    out = []
-    for k, q in enumerate(traj.q):
-        human = poser.model_keypoints(syn.q[k])
-        pin.framesForwardKinematics(model, data, q)
-        row = []
-        for side in ("left", "right"):
-            rob = {
-                n: data.oMf[model.getFrameId(g1.keyframes[f"{side}_{n}"])].translation for n in keys
-            }
-            for a, b in (("shoulder", "elbow"), ("elbow", "wrist")):
-                u, v = rob[b] - rob[a], human[f"{side}_{b}"] - human[f"{side}_{a}"]
-                row.append(
-                    np.degrees(
-                        np.arccos(np.clip(u @ v / np.linalg.norm(u) / np.linalg.norm(v), -1, 1))
-                    )
-                )
-        out.append(row)
-    return np.array(out)
+    return arm_direction_errors(g1, traj.q, poser, syn.q)
 
 
 def test_wrist_and_elbow_directions_follow_the_human(g1, human_run):
