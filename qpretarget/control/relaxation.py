@@ -197,28 +197,8 @@ class Fallback:
         w_rows = np.ones(m)
         for name, rows in self.groups:
             w_rows[rows] = self.weight_of[name]
+        self._w_rows = w_rows
         self._bound_cons = [c for c in controller.bound_constraints if c.has_bounds]
-        # Phase-1 QP: x = [v (nv); s- (m); s+ (m); b- (nv); b+ (nv)], rows
-        #   l <= C v + s- - s+ <= u,   lb <= v + b- - b+ <= ub,   slacks >= 0.
-        self._sl = {
-            "s-": slice(nv, nv + m),
-            "s+": slice(nv + m, nv + 2 * m),
-            "b-": slice(nv + 2 * m, 2 * nv + 2 * m),
-            "b+": slice(2 * nv + 2 * m, 3 * nv + 2 * m),
-        }
-        n = 3 * nv + 2 * m
-        self._p = p = QPProblem(n, m + nv)
-        p.H[np.arange(nv), np.arange(nv)] = self.RHO_V
-        p.H[np.arange(nv, n), np.arange(nv, n)] = self.EPS_SLACK
-        sl = self._sl
-        p.C[:m, sl["s-"]] = np.eye(m)
-        p.C[:m, sl["s+"]] = -np.eye(m)
-        p.C[m:, :nv] = np.eye(nv)
-        p.C[m:, sl["b-"]] = np.eye(nv)
-        p.C[m:, sl["b+"]] = -np.eye(nv)
-        p.g[sl["s-"]] = w_rows
-        p.g[sl["s+"]] = w_rows
-        p.lb[nv:] = 0.0
         self._cap_lo, self._cap_hi = np.full(nv, np.inf), np.full(nv, np.inf)
 
     # ------------------------------------------------------------------ helpers
@@ -268,6 +248,72 @@ class Fallback:
             own_hi.append(mhi)
         return w_lo, w_hi, own_lo, own_hi
 
+    def _phase1(
+        self,
+        C: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        lb: np.ndarray,
+        ub: np.ndarray,
+        w_lo: np.ndarray,
+        w_hi: np.ndarray,
+    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The least relaxation (module docstring), with slacks only where a side is bounded.
+
+        Variables ``x = [v; s-; s+; b-; b+]`` where ``s-`` are the rows with a finite lower side,
+        ``s+`` those with a finite upper side, ``b-/b+`` the box entries with a finite side that
+        may give (``_box_owners``' caps); rows with no finite side are left out. A slack on an
+        unbounded side could only cost, so the optimum is the same as with every slack present,
+        in a QP a fraction of the size (inactive collision pairs are most rows).
+
+        Returns:
+            ``(solution, s-, s+, b-, b+)``, the slacks at full size (m, m, nv, nv).
+        """
+        nv, m = self.nv, self.m
+        rows = np.flatnonzero(np.isfinite(lo) | np.isfinite(hi))
+        r = rows.size
+        lr, ur = lo[rows], hi[rows]
+        i_lo = np.flatnonzero(np.isfinite(lr))
+        i_hi = np.flatnonzero(np.isfinite(ur))
+        j_lo = np.flatnonzero(np.isfinite(lb) & (self._cap_lo > 0))
+        j_hi = np.flatnonzero(np.isfinite(ub) & (self._cap_hi > 0))
+        sizes = (i_lo.size, i_hi.size, j_lo.size, j_hi.size)
+        offs = np.cumsum((nv,) + sizes)  # start of s-, s+, b-, b+, and n
+        n = int(offs[-1])
+        p = QPProblem(n, r + nv)
+        p.H[np.arange(nv), np.arange(nv)] = self.RHO_V
+        p.H[np.arange(nv, n), np.arange(nv, n)] = self.EPS_SLACK
+        p.C[:r, :nv] = C[rows]
+        p.C[r:, :nv] = np.eye(nv)
+        w = self._w_rows[rows]
+        for (idx, row0, sign, weight, cap), start in zip(
+            (
+                (i_lo, 0, 1.0, w[i_lo], None),
+                (i_hi, 0, -1.0, w[i_hi], None),
+                (j_lo, r, 1.0, w_lo[j_lo], self._cap_lo[j_lo]),
+                (j_hi, r, -1.0, w_hi[j_hi], self._cap_hi[j_hi]),
+            ),
+            offs[:4],
+            strict=True,
+        ):
+            cols = start + np.arange(idx.size)
+            p.C[row0 + idx, cols] = sign
+            p.g[cols] = weight
+            if cap is not None:
+                p.ub[cols] = cap
+        p.l[:r], p.u[:r] = lr, ur
+        p.l[r:], p.u[r:] = lb, ub
+        p.lb[nv:] = 0.0
+        sol = self.solver.solve(p)
+        s_lo, s_hi, b_lo, b_hi = np.zeros(m), np.zeros(m), np.zeros(nv), np.zeros(nv)
+        if sol.x is not None:
+            x = np.maximum(sol.x, 0.0)
+            s_lo[rows[i_lo]] = x[offs[0] : offs[1]]
+            s_hi[rows[i_hi]] = x[offs[1] : offs[2]]
+            b_lo[j_lo] = x[offs[2] : offs[3]]
+            b_hi[j_hi] = x[offs[3] : offs[4]]
+        return sol, s_lo, s_hi, b_lo, b_hi
+
     # ------------------------------------------------------------------ solve
     def reset(self) -> None:
         """Drop the phase-1 solver's warm start (runs from ``Controller.reset`` reproduce)."""
@@ -286,20 +332,13 @@ class Fallback:
             raises on numerical trouble.
         """
         t0 = time.perf_counter()
-        nv, m, p, sl = self.nv, self.m, self._p, self._sl
+        nv = self.nv
         C, lo, hi, lb, ub = tp.C, tp.l, tp.u, tp.lb, tp.ub
         if not (np.isfinite(C).all() and not np.isnan(lo).any() and not np.isnan(hi).any()):
             return FallbackResult(None, {}, "non-finite constraint rows", time.perf_counter() - t0)
         w_lo, w_hi, own_lo, own_hi = self._box_owners(tp)
-        p.C[:m, :nv] = C
-        p.l[:m], p.u[:m] = lo, hi
-        p.l[m:], p.u[m:] = lb, ub
-        p.g[sl["b-"]] = w_lo
-        p.g[sl["b+"]] = w_hi
-        p.ub[sl["b-"]] = self._cap_lo
-        p.ub[sl["b+"]] = self._cap_hi
         try:
-            sol = self.solver.solve(p)
+            sol, s_lo, s_hi, b_lo, b_hi = self._phase1(C, lo, hi, lb, ub, w_lo, w_hi)
         except Exception as exc:  # noqa: BLE001 - the loop must go on
             return FallbackResult(None, {}, f"relaxation failed: {exc}", time.perf_counter() - t0)
         if sol.x is None or not sol.success:
@@ -307,8 +346,6 @@ class Fallback:
                 None, {}, f"relaxation failed: {sol.status}", time.perf_counter() - t0
             )
         x = sol.x
-        s_lo, s_hi = np.maximum(x[sl["s-"]], 0.0), np.maximum(x[sl["s+"]], 0.0)
-        b_lo, b_hi = np.maximum(x[sl["b-"]], 0.0), np.maximum(x[sl["b+"]], 0.0)
         tol = self.report_tolerance
         relaxed: dict[str, float] = {}
         for name, rows in self.groups:
