@@ -49,8 +49,10 @@ class StepResult:
         v: velocity applied during the tick (nv,), read-only.
         tick: tick counter (1 for the first step after ``reset``).
         t: controller time after the tick [s].
-        status: ``"ok"``, ``"relaxed"`` (a hard constraint gave, see ``relaxed``) or ``"held"``
-            (no usable solution: the robot holds its configuration).
+        status: ``"ok"``, ``"relaxed"`` (a constraint gave: a soft row's slack, a box bound in
+            the merge or the relaxation fallback; see ``relaxed`` and ``messages``) or ``"held"``
+            (no usable solution or the solver's budget ran out: the robot brakes within its
+            acceleration limits, feet kept; docs/reliability.md).
         solver_status: status text of the solver.
         task_errors: task name -> error norm at the start of the tick against this tick's target
             (position tasks in [m], orientation-only tasks in [rad]; see each task's error_norm).
