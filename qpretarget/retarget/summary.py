@@ -140,7 +140,15 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
     lines.append("ticks        " + ", ".join(f"{k} {v}" for k, v in st.items()))
     phases = summary.get("support_states")
     if phases:
+        # Static mode: the lower_<side> sequences; kinematic mode: feet entering "landing"
+        # (support_state "left-state/right-state").
         steps = sum(1 for _, s in phases if s.startswith("lower_"))
+        previous = ["stance", "stance"]
+        for _, s in phases:
+            states = s.split("/")
+            if len(states) == 2:
+                steps += sum(a == "landing" != b for a, b in zip(states, previous, strict=True))
+                previous = states
         lines.append(f"support      {len(phases)} state changes, {steps} step(s) placed")
     if "human" in summary:
         lines += format_human_metrics(summary["human"])
