@@ -123,7 +123,7 @@ class CloudSequence:
         return np.array([f.t for f in self.frames])
 
     def save(self, path: str | Path) -> Path:
-        """Write the ragged ``.npz`` layout (``points``, ``counts``, ``t``, ...)."""
+        """Write the ragged ``.npz`` layout (``points``, ``counts``, ``t``, ...), atomically."""
         path = Path(path)
         arrays: dict[str, Any] = {
             "points": np.concatenate([f.points for f in self.frames])
@@ -139,7 +139,10 @@ class CloudSequence:
         for k, v in self.meta.items():
             if isinstance(v, np.ndarray):
                 arrays[f"meta/{k}"] = v
-        np.savez_compressed(path, **arrays)
+        from ..fileio import atomic_path
+
+        with atomic_path(path, suffix=".npz") as tmp:  # no half-written file on failure
+            np.savez_compressed(tmp, **arrays)
         return path
 
 
