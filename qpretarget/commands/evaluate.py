@@ -13,15 +13,15 @@ HELP = """examples:
       the same motion retargeted with the constraints off, shown beside (CRAC Fig. 3-4, 11)
   qpretarget evaluate run.npz -o report/ --no-figures --pairs left_wrist_yaw_link:torso_link
       metrics only, for the collision pairs given (the mesh audit below still covers every pair)
-
-Every run is also audited for self-collision over every body pair on the meshes, whatever the
-config or --pairs say (metrics.json "mesh_self_collision", self_collision_all_pairs.png, and the
-"mesh collision" line: penetrating frames and minimum distance; docs/collisions.md).
   qpretarget evaluate run.npz -o report/ --physics
       also replay the run in MuJoCo (physics.json, physics.png): does the robot stay up, which
       joints hit their torque limits, what a virtual root wrench had to add (docs/physics.md)
   qpretarget evaluate run.npz -o report/ --physics --physics-gains unitree --no-assist
       the vendor's PD gains, unassisted replay only
+
+Every run is also audited for self-collision over every body pair on the meshes, whatever the
+config or --pairs say (metrics.json "mesh_self_collision", self_collision_all_pairs.png, and the
+"mesh collision" line: penetrating frames and minimum distance; docs/collisions.md).
 """
 
 
