@@ -95,7 +95,14 @@ class Augmentation(Strategy):
         self._slot_rows = self._slot_rows[:0]
 
     def reset(self) -> None:
+        """Drop the warm start and the slack slots grown since.
+
+        A run from ``reset`` must repeat to the last bit, and a larger QP gives the same
+        solution only to round-off.
+        """
         self._solver.reset()
+        if self._soft_idx.size:
+            self._allocate_slots(min(self._soft_idx.size, self.INITIAL_SLOTS))
 
     def solvers(self) -> list[QPSolver]:
         return [self._solver]
