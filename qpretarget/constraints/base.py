@@ -140,6 +140,10 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
     def reset(self, state: RobotState) -> None:
         """Forget history (anchors, previous velocities) at ``Controller.reset``."""
 
+    def describe(self) -> list[str]:
+        """Lines describing the module's settings, for ``qpretarget info`` and the viewer."""
+        return []
+
     def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
         """Called with the applied velocity once a tick is done (e.g. to remember it)."""
 

@@ -29,6 +29,7 @@ from ..errors import ConfigError
 from ..motion.calibration import Calibration, nearest_rotation, triad, yaw_of
 from ..motion.keypoints import KeypointMap, KeypointMapError
 from ..motion.phases import SIDES
+from ..tasks.frame import FrameTask
 from .spec import ORIENTATIONS, RetargetSpec, default_robot_keypoints
 from .support import rot_z
 
@@ -97,7 +98,7 @@ class RobotBinding:
         ctrl.reset()
         self.task_reference: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for name, task in ctrl.tasks.items():
-            if hasattr(task, "current_pose"):
+            if isinstance(task, FrameTask):
                 p, R = task.current_pose(ctrl.state)
                 self.task_reference[name] = (p.copy(), R.copy())
         self.task_offsets: dict[str, np.ndarray] = {}

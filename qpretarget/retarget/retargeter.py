@@ -401,13 +401,7 @@ class Retargeter:
         """Reset the controller and every stateful stage for a new motion."""
         self._stream = stream
         ctrl = self.controller
-        ctrl.reset()
-        # Technical debt: Controller.reset() does not drop the warm start of the relaxation
-        # fallback's solver, so a run after a relaxed tick differed in the last bits from a fresh
-        # one (and a sensitive closed loop amplifies that). Reset it here until reset() does.
-        fallback_solver = getattr(getattr(ctrl, "fallback", None), "solver", None)
-        if fallback_solver is not None and hasattr(fallback_solver, "reset"):
-            fallback_solver.reset()
+        ctrl.reset()  # resets the fallback's solver too: runs from here reproduce bit for bit
         self.calibration: Calibration | None = None
         self.scaler: Scaler | None = None
         self._pending: list[tuple[float, np.ndarray]] = []

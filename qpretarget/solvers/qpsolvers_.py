@@ -153,8 +153,9 @@ class QpsolversSolver(QPSolver):
         iters = -1
         extras = getattr(sol, "extras", {}) or {}
         info = extras.get("info")
-        if info is not None and hasattr(info, "iter"):
-            iters = int(info.iter)
+        info_iter = getattr(info, "iter", None)  # a backend's own info record, if it has one
+        if info_iter is not None:
+            iters = int(info_iter)
         elif "iter" in extras:
             iters = int(extras["iter"])
         ok = bool(sol.found) if sol.found is not None else x is not None

@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ..collision import CollisionModel
+from ..control.result import StepResult
 from ..errors import QPRetargetError, missing_dependency
 from ..robot import RobotModel
 from .meshes import load_link_meshes
@@ -178,9 +180,9 @@ class Viewer:
         for c in controller.constraints:
             lines.append(f"- `{c.name}` ({c.type_name})")
             cmodel = getattr(c, "model", None)
-            if cmodel is not None and hasattr(cmodel, "shapes") and hasattr(cmodel, "pairs"):
+            if isinstance(cmodel, CollisionModel):
                 self._show_collision_model(c.name, cmodel)
-            for line in getattr(c, "describe", lambda: [])()[:12]:
+            for line in c.describe()[:12]:
                 lines.append(f"    - {line}")
         with self.server.gui.add_folder("Setup"):
             self.server.gui.add_markdown("\n".join(lines))
@@ -507,7 +509,7 @@ class LiveViewer:
 
     def __call__(self, result: Any) -> None:
         """Publish the tick's configuration to the viewer process (seqlock write)."""
-        q = result.q if hasattr(result, "q") else result
+        q = result.q if isinstance(result, StepResult) else result
         buf = self._buf
         buf[0] += 1.0  # odd: writing
         np.copyto(self._q, q)
