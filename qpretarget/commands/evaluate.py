@@ -119,7 +119,8 @@ def run(args: argparse.Namespace) -> int:
     before = None
     if args.before:
         btraj = RobotTrajectory.load(args.before)
-        same_pairs = pairs or [tuple(p.split("/")) for p in series.pair_names] or None
+        named = [p.split("/", 1) for p in series.pair_names]
+        same_pairs = pairs or [(a, b) for a, b in named] or None
         before = compute_series(btraj, pairs=same_pairs, safety_distance=series.safety_distance)
         bm = summarize(before, per_frame=False)
         metrics["before"] = {
