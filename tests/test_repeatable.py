@@ -34,3 +34,33 @@ def test_two_processes_give_bit_identical_q(tmp_path, repo_dir, mocap_dir, clip)
             qs.append(z["q"])
     assert qs[0].shape == qs[1].shape and len(qs[0]) >= 200
     assert np.array_equal(qs[0], qs[1]), f"max difference {np.abs(qs[0] - qs[1]).max():.3e}"
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="collision/model.py: CollisionModel.invalidate() (DistanceDamper.reset) keeps the "
+    "pinocchio GeometryData whose coal distance results carry GJK warm-start guesses, so the "
+    "first tick after reset gets other witness points (row gradients 0.016 apart); rebuilding "
+    "gdata there (createData, signed distances, _results, _mask_key) makes this pass",
+)
+def test_a_run_from_reset_repeats_to_the_bit(repo_dir):
+    """In one process, one controller: 300 ticks of seeded wild targets (collision rows in play,
+    slack slots growing), reset, the same 300 ticks: the same q, bit for bit."""
+    from qpretarget import Controller
+
+    ctrl = Controller.from_yaml(repo_dir / "configs" / "g1_whole_body.yaml")
+    runs = []
+    for _ in range(2):
+        ctrl.reset()
+        rng = np.random.default_rng(5)
+        hand = {n: ctrl.tasks[n].position_target.copy() for n in ("left_hand", "right_hand")}
+        torso = ctrl.tasks["torso"]
+        qs = []
+        for k in range(300):
+            if k % 40 < 15:  # hands into the torso
+                t = {n: torso.current_pose(ctrl.state)[0].copy() for n in hand}
+            else:
+                t = {n: p + rng.normal(0, 0.2, 3) for n, p in hand.items()}
+            qs.append(np.array(ctrl.step(t).q))
+        runs.append(np.array(qs))
+    assert np.array_equal(runs[0], runs[1]), np.abs(runs[0] - runs[1]).max()
