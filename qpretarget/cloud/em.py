@@ -323,8 +323,11 @@ def _kdtree_sums(
         d2 = dist * dist
     if d2 is None:
         k = pairs.shape[1]
-        diff = B[:, None, :] - Afull[pairs]
-        d2 = np.einsum("nka,nka->nk", diff, diff)
+        # Coordinate by coordinate on contiguous columns (a (N, k, 3) gather is slow).
+        d2 = np.zeros(pairs.shape)
+        for c in range(B.shape[1]):
+            diff = B[:, c, None] - np.take(np.ascontiguousarray(Afull[:, c]), pairs)
+            d2 += diff * diff
     logp, post = _log_posteriors(d2 * (-0.5 / sigma2), *log_in_out)
     nll = -float(logp.sum())
     w = post.sum(axis=1)

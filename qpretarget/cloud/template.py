@@ -141,6 +141,48 @@ def _even_subset(points: np.ndarray, n: int, rng: np.random.Generator) -> np.nda
     return np.sort(rng.choice(best, size=n, replace=False))
 
 
+def _rotate_rows(G: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(M, 3) rows ``R_m v_m`` from ``G`` (9, M), the rotations' entries row-major, by component.
+
+    Numpy is slow on many 3x3 products (``einsum("mab,mb->ma")``); nine products of
+    contiguous (M,) rows are not.
+    """
+    x, y, z = v[:, 0], v[:, 1], v[:, 2]
+    out = np.empty((G.shape[1], 3))
+    out[:, 0] = G[0] * x + G[1] * y + G[2] * z
+    out[:, 1] = G[3] * x + G[4] * y + G[5] * z
+    out[:, 2] = G[6] * x + G[7] * y + G[8] * z
+    return out
+
+
+def _moment_columns(P: np.ndarray, r: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """(M, 19) columns P, P r (3), P r r^T (9, row-major), E (3), r x E (3), column by column.
+
+    Filled one column at a time: numpy is slow on many rows of 3 or 9 entries.
+    """
+    W = np.empty((19, len(P)))  # rows contiguous; returned transposed
+    x, y, z = r[:, 0], r[:, 1], r[:, 2]
+    W[0] = P
+    np.multiply(P, x, out=W[1])
+    np.multiply(P, y, out=W[2])
+    np.multiply(P, z, out=W[3])
+    np.multiply(W[1], x, out=W[4])
+    np.multiply(W[1], y, out=W[5])
+    np.multiply(W[1], z, out=W[6])
+    W[7] = W[5]
+    np.multiply(W[2], y, out=W[8])
+    np.multiply(W[2], z, out=W[9])
+    W[10] = W[6]
+    W[11] = W[9]
+    np.multiply(W[3], z, out=W[12])
+    W[13:16] = E.T
+    ex, ey, ez = E[:, 0], E[:, 1], E[:, 2]
+    W[16] = y * ez - z * ey
+    W[17] = z * ex - x * ez
+    W[18] = x * ey - y * ex
+    return W.T
+
+
 def _sandwich(J: np.ndarray, K: np.ndarray) -> np.ndarray:
     r""":math:`\sum_j J_j^\top K_j J_j` for stacks J (n, a, nv) and K (n, a, a), as one product."""
     n, a, nv = J.shape
@@ -566,10 +608,10 @@ class Template:
             pin.forwardKinematics(model, data, q)
         R = np.array([M.rotation for M in data.oMi])
         p = np.array([M.translation for M in data.oMi])
-        Rj = R[self.joint]
-        off = np.einsum("mab,mb->ma", Rj, self.local)
-        pts = off + p[self.joint]
-        nrm = np.einsum("mab,mb->ma", Rj, self.normals0)
+        G = np.take(R.reshape(len(R), 9).T, self.joint, axis=1)  # (9, M) rows contiguous
+        off = _rotate_rows(G, self.local)
+        pts = off + np.take(p, self.joint, axis=0)
+        nrm = _rotate_rows(G, self.normals0)
         if len(self.blend):
             w = self.blend_weight[:, None]
             i = self.blend_parent
@@ -608,6 +650,18 @@ class Template:
                 out[hit] = (1 - w) * out[hit] + w * Jpar
         return out
 
+    def _group_sums(self, W: np.ndarray) -> np.ndarray:
+        """(J, c) sums of the rows of ``W`` (M, c) over the points of each used joint."""
+        g = self._group
+        cache = getattr(self, "_group_matrix", None)
+        if cache is None or cache[0] is not g:
+            from scipy.sparse import csr_matrix
+
+            M = len(g)
+            G = csr_matrix((np.ones(M), (g, np.arange(M))), shape=(len(self.used_joints), M))
+            cache = self._group_matrix = (g, G)
+        return np.asarray(cache[1] @ W)
+
     def normal_equations(
         self,
         posed: PosedTemplate,
@@ -645,34 +699,26 @@ class Template:
             H = np.einsum("man,mak->nk", Jw, Jw)
             b = np.einsum("man,ma->n", Jm, E)
         else:
-            g, nJ = self._group, len(self.used_joints)
+            nJ = len(self.used_joints)
             r = posed.offsets
-            w0 = np.bincount(g, P1, nJ)
-            c = np.stack([np.bincount(g, P1 * r[:, a], nJ) for a in range(3)], 1)
-            rr = np.stack(
-                [np.bincount(g, P1 * r[:, a] * r[:, b], nJ) for a in range(3) for b in range(3)], 1
-            ).reshape(nJ, 3, 3)
+            # Per-joint sums of P, P r, P r r^T, e, r x e: one sparse product.
+            sums = self._group_sums(_moment_columns(P1, r, E))
+            w0, c, rr = sums[:, 0], sums[:, 1:4], sums[:, 4:13].reshape(nJ, 3, 3)
+            f, tau = sums[:, 13:16], sums[:, 16:19]
             K = np.zeros((nJ, 6, 6))
             K[:, 0, 0] = K[:, 1, 1] = K[:, 2, 2] = w0
             Sc = skew_batch(c)
             K[:, :3, 3:] = -Sc
             K[:, 3:, :3] = Sc
             K[:, 3:, 3:] = np.trace(rr, axis1=1, axis2=2)[:, None, None] * np.eye(3) - rr
-            f = np.stack([np.bincount(g, E[:, a], nJ) for a in range(3)], 1)
-            tq = np.cross(r, E)
-            tau = np.stack([np.bincount(g, tq[:, a], nJ) for a in range(3)], 1)
             H = _sandwich(J6, K)
             b = np.einsum("jan,ja->n", J6, np.concatenate([f, tau], 1))
         if normal_weight > 0 and P1n is not None and En is not None:
-            g, nJ = self._group, len(self.used_joints)
+            nJ = len(self.used_joints)
             n = posed.normals
-            nn = np.stack(
-                [np.bincount(g, P1n * n[:, a] * n[:, b], nJ) for a in range(3) for b in range(3)], 1
-            ).reshape(nJ, 3, 3)
-            w0 = np.bincount(g, P1n, nJ)
+            sums = self._group_sums(_moment_columns(P1n, n, En))
+            w0, nn, tau = sums[:, 0], sums[:, 4:13].reshape(nJ, 3, 3), sums[:, 16:19]
             Kn = w0[:, None, None] * np.eye(3) - nn
-            tn = np.cross(n, En)
-            tau = np.stack([np.bincount(g, tn[:, a], nJ) for a in range(3)], 1)
             Ja = J6[:, 3:]
             H = H + normal_weight * _sandwich(Ja, Kn)
             b = b + normal_weight * np.einsum("jan,ja->n", Ja, tau)
