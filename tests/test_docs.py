@@ -223,6 +223,11 @@ PROBES: dict[tuple[str, str], dict[str, Any]] = {
                   "obstacle_links": ["left_wrist_yaw_link", "left_elbow_link",
                                      "left_rubber_hand"]},
     },
+    # Both feet lifted (no contact in force), the floor 10 cm above the soles: pushed up.
+    ("constraints", "sole_ground"): {
+        "entry": {"type": "sole_ground", "height": 0.1},
+        "with": [{"type": "contacts", "active": []}],
+    },
 }  # fmt: skip
 
 HIERARCHY = {"strategy": {"type": "hierarchy"}}
@@ -324,6 +329,12 @@ CHANGES: dict[tuple[str, str, str], tuple[dict[str, Any], Any]] = {
     ("constraints", "ground", "max_rows"): ({"entry": {"obstacle_links": None}}, 1),
     ("constraints", "ground", "trust_region"): ({}, None),
     ("constraints", "ground", "hull_vertices"): ({}, 8),
+    ("constraints", "sole_ground", "feet"): ({}, ["left_foot"]),
+    ("constraints", "sole_ground", "height"): ({}, 0.01),
+    ("constraints", "sole_ground", "gain_per_tick"): ({}, 0.1),
+    ("constraints", "sole_ground", "recovery_speed"): ({}, 0.05),
+    ("constraints", "sole_ground", "d_i"): ({"entry": {"height": 0.0, "gain_per_tick": 0.01}},
+                                           0.001),
 }  # fmt: skip
 
 #: Documented task and constraint keys that do not change the motion, and why.
@@ -332,7 +343,7 @@ NO_EFFECT: dict[tuple[str, str, str], str] = {
        for t in ("frame", "com", "posture", "damping", "chain_shape")},
     **{("constraints", c, "name"): "a label for messages and StepResult.relaxed"
        for c in ("joint_limits", "velocity_limits", "acceleration_limits", "contacts",
-                 "support_polygon", "self_collision", "ground")},
+                 "support_polygon", "self_collision", "ground", "sole_ground")},
     ("constraints", "self_collision", "broad_phase"): "conservative: it only skips pairs that "
     "provably stay beyond d_i, so the rows and the result are the same (faster)",
     ("constraints", "ground", "broad_phase"): "conservative: same rows, same result (faster)",

@@ -27,9 +27,9 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision import CollisionModel, LinkShape, link_shapes, obstacle_shape
-from ..errors import ConfigError
+from ..errors import ConfigError, UnknownNameError
 from ..robot import RobotModel, RobotState
-from .base import CONSTRAINTS, Constraint
+from .base import CONSTRAINTS, Constraint, ConstraintBlock
 from .contacts import Contacts
 from .self_collision import DistanceDamper, resolve_link
 
@@ -271,6 +271,152 @@ class Ground(DistanceDamper):
             f"margin={self.d_s}, obstacles={[o.get('name') for o in self._obstacles_spec]}, "
             f"name={self.name!r})"
         )
+
+
+@CONSTRAINTS.register("sole_ground")
+class SoleGround(Constraint):
+    r"""Soles of the lifted feet stay above the ground: the sole rectangle's corners, one row each.
+
+    For every foot that is *not* in force in the ``contacts`` constraint (a swinging foot), each
+    corner :math:`c` of its sole rectangle (the sole frame's origin if it has none), at height
+    :math:`z_c` above the ground :math:`z = h`, gets the damper row
+
+    .. math::
+        -\dot z_c = -(J_{v,z} + r_y J_{\omega,x} - r_x J_{\omega,y})\, v
+        \le \max(\text{rate}\,(z_c - h), -\text{recovery\_speed})
+        \quad \text{when } z_c < h + d_i,
+
+    :math:`r = R\,c` the corner's lever from the sole frame (world axes), rate = ``gain_per_tick``
+    / dt: with the default 1 a corner may come down as fast as it likes but not past the floor in
+    one tick (first order: :math:`z_c + \dot z_c\,dt \ge h`), so a landing is not slowed; below 1
+    it closes its gap by at most that fraction per tick; one under the floor is pushed up at most
+    ``recovery_speed``. (0.5 slowed the soles near the floor enough to change the stride: the
+    walk-stop clip's travel ratio 1.10 -> 1.14.) Rows on the sole rectangle's corners (the points
+    the contact stands on) rather than the :class:`Ground` damper on the foot link's hull: no
+    distance query, no arming logic, and only the lifted feet have rows (feet in contact are held
+    by the contact equality).
+    Soft, as ``ground`` (importance 75).
+
+    Args:
+        feet: the robot's feet (sole frame and rectangle of its description); default all.
+        height: ground height :math:`h` [m].
+        d_i: rows only for corners lower than :math:`h + d_i` [m].
+        gain_per_tick: fraction of the height a corner may lose per tick near the floor, (0, 1].
+        recovery_speed: largest upward speed asked of a corner under the floor [m/s].
+        name: constraint name.
+
+    Raises:
+        ConfigError: bad values; UnknownNameError: unknown feet.
+    """
+
+    importance = 75
+
+    def __init__(
+        self,
+        *,
+        feet: Sequence[str] | None = None,
+        height: float = 0.0,
+        d_i: float = 0.05,
+        gain_per_tick: float = 1.0,
+        recovery_speed: float = 0.5,
+        name: str | None = None,
+    ) -> None:
+        super().__init__(name)
+        for key, value in (("height", height), ("d_i", d_i), ("gain_per_tick", gain_per_tick),
+                           ("recovery_speed", recovery_speed)):  # fmt: skip
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ConfigError(f"{key} must be a number, got {value!r}.")
+        if not np.isfinite(height):
+            raise ConfigError(f"height must be a finite number [m], got {height!r}.")
+        if not d_i > 0 or not 0 < gain_per_tick <= 1 or not recovery_speed > 0:
+            raise ConfigError(
+                "d_i [m] and recovery_speed [m/s] must be positive and gain_per_tick in (0, 1], "
+                f"got d_i={d_i!r}, gain_per_tick={gain_per_tick!r}, "
+                f"recovery_speed={recovery_speed!r}."
+            )
+        self.height = float(height)
+        self.d_i = float(d_i)
+        self.gain_per_tick = float(gain_per_tick)
+        self.recovery_speed = float(recovery_speed)
+        if feet is not None and (isinstance(feet, str) or not isinstance(feet, Sequence)):
+            raise ConfigError(f"feet must be a list of foot names, got {feet!r}.")
+        self._feet_spec = None if feet is None else [str(f) for f in feet]
+        self.feet: list[str] = []
+        self.frame_ids: list[int] = []
+        self._contacts: Contacts | None = None
+        self._corners: list[np.ndarray] = []
+
+    def bind(self, robot: RobotModel, *, path: str = "") -> None:
+        super().bind(robot, path=path)
+        p = f"{path}." if path else ""
+        feet = self._feet_spec if self._feet_spec is not None else list(robot.feet)
+        self.feet, self.frame_ids, self._corners = [], [], []
+        for i, foot in enumerate(feet):
+            if foot not in robot.feet:
+                raise UnknownNameError(
+                    "foot", foot, list(robot.feet), path=f"{p}feet[{i}]",
+                    fix=f"Robot {robot.name!r} has feet {list(robot.feet)}.",
+                )  # fmt: skip
+            desc = robot.feet[foot]
+            self.feet.append(foot)
+            self.frame_ids.append(robot.frame_id(desc.frame, path=f"{p}feet[{i}]"))
+            if desc.rectangle is None:
+                self._corners.append(np.zeros((1, 3)))
+            else:
+                x0, x1, y0, y1 = (float(x) for x in desc.rectangle)
+                self._corners.append(
+                    np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+                )
+        self.n_rows = sum(len(c) for c in self._corners)
+        self._C = np.zeros((self.n_rows, robot.nv))
+        self._l = np.full(self.n_rows, -np.inf)
+        self._u = np.full(self.n_rows, np.inf)
+
+    def link(self, constraints: Sequence[Constraint]) -> None:
+        """Find the contacts constraint: a sole in contact has no row."""
+        for c in constraints:
+            if isinstance(c, Contacts):
+                self._contacts = c
+                return
+
+    def _in_contact(self) -> set[int]:
+        c = self._contacts
+        if c is None:
+            return set()
+        active = set(c.active_feet)
+        return {fid for n, fid in zip(c.names, c.frame_ids, strict=True) if n in active}
+
+    def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock | None:
+        C, hi = self._C, self._u
+        C.fill(0.0)
+        hi.fill(np.inf)
+        rate = self.gain_per_tick / dt
+        standing = self._in_contact()
+        row = 0
+        for i, fid in enumerate(self.frame_ids):
+            corners = self._corners[i]
+            n = len(corners)
+            if fid in standing:
+                row += n
+                continue
+            M = state.frame_placement(fid)
+            r = corners @ M.rotation.T  # levers in world axes
+            z = M.translation[2] + r[:, 2] - self.height
+            near = np.flatnonzero(z < self.d_i)
+            if near.size:
+                J = state.frame_jacobian(fid)
+                for k in near:
+                    C[row + k] = -(J[2] + r[k, 1] * J[3] - r[k, 0] * J[4])
+                    hi[row + k] = max(rate * z[k], -self.recovery_speed)
+            row += n
+        return ConstraintBlock(self.name, C, self._l, hi)
+
+    def describe(self) -> list[str]:
+        """Lines for ``qpretarget info``."""
+        return [
+            f"soles of lifted feet above z = {self.height} m: {self.n_rows} corner rows, "
+            f"d_i={self.d_i} m, gain_per_tick={self.gain_per_tick}"
+        ]
 
 
 def _halfspace(height: float) -> Any:
