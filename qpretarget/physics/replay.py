@@ -230,6 +230,288 @@ def _floor_height(pm: PhysicsModel, d: Any, mujoco: Any) -> float:
 
 
 # ------------------------------------------------------------------------------------ replay
+@dataclass
+class _Reference:
+    """The run's reference series in the model's joint and foot order (one row a frame)."""
+
+    t: np.ndarray
+    root: np.ndarray
+    joints: np.ndarray
+    joint_vel: np.ndarray
+    base_vel: np.ndarray
+    contacts: np.ndarray
+    contacts_assumed: bool
+
+
+def _reference(traj: Any, pm: PhysicsModel, cols: np.ndarray) -> _Reference:
+    """The run's base pose, joints, velocities and supporting feet, matched to ``pm``.
+
+    A run without a velocity of the model's width gets zero velocities; a run without contact
+    flags (or with flags of another shape) has every foot supporting (``contacts_assumed``).
+    """
+    t = np.asarray(traj.t, float)
+    T, n, F = len(t), len(pm.joint_names), len(pm.foot_names)
+    q_all = np.asarray(traj.q, float)
+    v_all = np.asarray(traj.v, float)
+    has_v = v_all.shape == (T, 6 + n)
+    contacts = np.asarray(traj.contacts, bool) if traj.contacts is not None else None
+    ref_contacts = np.ones((T, F), bool)
+    contacts_assumed = True
+    if contacts is not None and contacts.shape == (T, len(traj.foot_names)) and F:
+        ref_contacts = np.zeros((T, F), bool)
+        for i, name in enumerate(pm.foot_names):
+            if name in traj.foot_names:
+                ref_contacts[:, i] = contacts[:, list(traj.foot_names).index(name)]
+        contacts_assumed = False
+    return _Reference(
+        t=t,
+        root=q_all[:, :7],
+        joints=q_all[:, 7:][:, cols],
+        joint_vel=v_all[:, 6:][:, cols] if has_v else np.zeros((T, n)),
+        base_vel=v_all[:, :6] if has_v else np.zeros((T, 6)),
+        contacts=ref_contacts,
+        contacts_assumed=contacts_assumed,
+    )
+
+
+def _feedforward(pm: PhysicsModel, ref: _Reference, feedforward: str) -> np.ndarray:
+    """``tau_ff`` of eq. 1 per frame (T, n): :func:`gravity_feedforward` or zeros.
+
+    Raises:
+        PhysicsInputError: ``feedforward`` is not one of :data:`FEEDFORWARDS`.
+    """
+    if feedforward not in FEEDFORWARDS:
+        raise PhysicsInputError(
+            f"unknown feed-forward {feedforward!r}; choose from {', '.join(FEEDFORWARDS)}."
+        )
+    if feedforward == "gravity" and pm.robot is not None:
+        return gravity_feedforward(pm, ref.root, ref.joints, ref.contacts)
+    return np.zeros((len(ref.t), len(pm.joint_names)))
+
+
+def _progress_bar(total: int, desc: str) -> Any:
+    """A tqdm bar counting frames."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="frame", desc=desc)
+
+
+#: The per-frame series :class:`_Replay` fills, named as :class:`ReplaySeries`'s fields.
+_SERIES = (
+    "pelvis_height",
+    "pelvis_height_ref",
+    "tilt_deg",
+    "root_pos_err",
+    "root_ori_err_deg",
+    "joint_err",
+    "saturated",
+    "foot_force",
+    "other_force",
+    "assist_force",
+    "assist_torque",
+    "assist_horizontal",
+)
+
+
+class _Replay:
+    """One replay in progress: the MuJoCo state, the reference and the series being filled.
+
+    :meth:`frame` simulates one run frame in the sub-steps of eq. 1 and records it; the caller
+    owns the loop (progress bar, fall test), :meth:`series` hands the result over.
+    """
+
+    def __init__(
+        self, pm: PhysicsModel, mujoco: Any, ref: _Reference, tau_ff: np.ndarray, assisted: bool
+    ) -> None:
+        self.pm, self.mujoco, self.ref, self.tau_ff, self.assisted = (
+            pm,
+            mujoco,
+            ref,
+            tau_ff,
+            assisted,
+        )
+        self.m = m = pm.model
+        pm.apply_gains()
+        self.d = mujoco.MjData(m)
+        self.dref = mujoco.MjData(m)
+        self.d.eq_active[pm.assist_eq] = 1 if assisted else 0
+        self.eq_type = mujoco.mjtConstraint.mjCNSTR_EQUALITY
+        self.floor = self._start()
+        self.h0 = float(m.opt.timestep)
+        self.f6 = np.zeros(6)
+        self.simulated = 1
+        self._allocate()
+
+    def _start(self) -> float:
+        """Place the floor under the first frame, set the first pose and velocity; the floor."""
+        mujoco, m, d, ref, pm = self.mujoco, self.m, self.d, self.ref, self.pm
+        root_ref, vb_ref = ref.root, ref.base_vel
+        set_configuration(d, root_ref[0], ref.joints[0], pm.qpos_adr)
+        floor = _floor_height(pm, d, mujoco)
+        m.geom_pos[pm.floor_geom] = [0.0, 0.0, floor]
+        R0 = _quat_to_mat(_wxyz(root_ref[0]))
+        d.qvel[:] = 0.0
+        d.qvel[0:3] = R0 @ vb_ref[0, :3]
+        d.qvel[3:6] = vb_ref[0, 3:6]
+        d.qvel[pm.dof_adr] = ref.joint_vel[0]
+        d.mocap_pos[pm.assist_mocap] = root_ref[0, :3]
+        d.mocap_quat[pm.assist_mocap] = _wxyz(root_ref[0])
+        mujoco.mj_forward(m, d)
+        return floor
+
+    def _allocate(self) -> None:
+        """The per-frame series (NaN until simulated) with frame 0 filled in."""
+        T, n, F = len(self.ref.t), len(self.pm.joint_names), len(self.pm.foot_names)
+        nan = np.full(T, np.nan)
+        self.pelvis_height, self.pelvis_height_ref = nan.copy(), self.ref.root[:, 2].copy()
+        self.tilt_deg, self.root_pos_err, self.root_ori_err_deg = nan.copy(), nan.copy(), nan.copy()
+        self.joint_err = np.full((T, n), np.nan)
+        self.saturated = np.zeros((T, n), bool)
+        self.foot_force = np.full((T, F), np.nan)
+        self.other_force = nan.copy()
+        self.assist_force, self.assist_torque = nan.copy(), nan.copy()
+        self.assist_horizontal = nan.copy()
+        d = self.d
+        self.pelvis_height[0] = d.qpos[2]
+        self.tilt_deg[0] = self.root_pos_err[0] = self.root_ori_err_deg[0] = 0.0
+        self.joint_err[0] = d.qpos[self.pm.qpos_adr] - self.ref.joints[0]
+        self.foot_force[0], self.other_force[0] = np.nan, np.nan
+
+    def _base_quats(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Reference base orientations of frames ``k - 1`` and ``k``, on one hemisphere."""
+        r0, r1 = _wxyz(self.ref.root[k - 1]), _wxyz(self.ref.root[k])
+        if float(np.dot(r0, r1)) < 0.0:
+            r1 = -r1
+        return r0, r1
+
+    def frame(self, k: int) -> None:
+        """Simulate from frame ``k - 1`` to ``k`` (eq. 1 each sub-step) and record frame ``k``."""
+        m, d, pm, ref = self.m, self.d, self.pm, self.ref
+        n, F = len(pm.joint_names), len(pm.foot_names)
+        dt = float(ref.t[k] - ref.t[k - 1])
+        n_sub = max(1, int(round(dt / self.h0)))
+        m.opt.timestep = dt / n_sub
+        r0, r1 = self._base_quats(k)
+        sat = np.zeros(n, bool)
+        ff = np.zeros(F)
+        fo = 0.0
+        af = ah = an = 0.0
+        for j in range(n_sub):
+            self._drive(k, j / n_sub, r0, r1, sat)
+            self.mujoco.mj_step(m, d)
+            if self.assisted:
+                w = self._weld_wrench()
+                if len(w) == 6:  # rows in world axes: x y z force, then torque
+                    af += float(np.linalg.norm(w[:3]))
+                    ah += float(np.linalg.norm(w[:2]))
+                    an += float(np.linalg.norm(w[3:]))
+            fo = self._floor_forces(ff, fo)
+        m.opt.timestep = self.h0
+        self.simulated = k + 1
+        self.saturated[k] = sat
+        self.foot_force[k] = ff / n_sub
+        self.other_force[k] = fo / n_sub
+        if self.assisted:
+            self.assist_force[k], self.assist_torque[k] = af / n_sub, an / n_sub
+            self.assist_horizontal[k] = ah / n_sub
+        self._measure(k, r1)
+
+    def _drive(self, k: int, a: float, r0: np.ndarray, r1: np.ndarray, sat: np.ndarray) -> None:
+        """Set the actuators (eq. 1) and the assisting target at fraction ``a`` of frame ``k``.
+
+        ``sat`` collects the joints whose unclamped torque reaches the limit.
+        """
+        pm, d, ref = self.pm, self.d, self.ref
+        q0, q1 = ref.joints[k - 1], ref.joints[k]
+        vff = ref.joint_vel[k]
+        f0, f1 = self.tau_ff[k - 1], self.tau_ff[k]
+        qr = q0 + a * (q1 - q0)
+        tff = f0 + a * (f1 - f0)
+        u = pm.kp * (qr - d.qpos[pm.qpos_adr]) + pm.kd * (vff - d.qvel[pm.dof_adr]) + tff  # eq. 1
+        sat |= np.abs(u) >= pm.effort
+        d.ctrl[:] = qr + (pm.kd / pm.kp) * vff + tff / pm.kp  # position actuators, clamped
+        if self.assisted:
+            p0, p1 = ref.root[k - 1, :3], ref.root[k, :3]
+            rr = r0 + a * (r1 - r0)
+            d.mocap_pos[pm.assist_mocap] = p0 + a * (p1 - p0)
+            d.mocap_quat[pm.assist_mocap] = rr / np.linalg.norm(rr)
+
+    def _weld_wrench(self) -> np.ndarray:
+        """The assisting weld's constraint force rows: 3 force rows, 3 torque rows."""
+        d = self.d
+        rows = (d.efc_type == self.eq_type) & (d.efc_id == self.pm.assist_eq)
+        return np.asarray(d.efc_force[rows])
+
+    def _floor_forces(self, ff: np.ndarray, fo: float) -> float:
+        """Add this step's normal floor forces to ``ff`` (per foot) and ``fo`` (the rest)."""
+        m, d, pm = self.m, self.d, self.pm
+        for c in range(d.ncon):
+            con = d.contact[c]
+            g1, g2 = int(con.geom1), int(con.geom2)
+            if g1 == pm.floor_geom:
+                other = g2
+            elif g2 == pm.floor_geom:
+                other = g1
+            else:
+                continue
+            self.mujoco.mj_contactForce(m, d, c, self.f6)
+            foot = pm.foot_of_body[m.geom_bodyid[other]]
+            if foot >= 0:
+                ff[foot] += self.f6[0]
+            else:
+                fo += self.f6[0]
+        return fo
+
+    def _measure(self, k: int, r1: np.ndarray) -> None:
+        """Base height, pose errors, joint errors and torso tilt of frame ``k``."""
+        mujoco, m, d, dref, pm, ref = self.mujoco, self.m, self.d, self.dref, self.pm, self.ref
+        q1, p1 = ref.joints[k], ref.root[k, :3]
+        qb = d.qpos[3:7]
+        self.pelvis_height[k] = d.qpos[2]
+        self.root_pos_err[k] = float(np.linalg.norm(d.qpos[0:3] - p1))
+        conj = np.array([qb[0], -qb[1], -qb[2], -qb[3]])
+        self.root_ori_err_deg[k] = math.degrees(
+            float(np.linalg.norm(_quat_log(_quat_mul(conj, r1))))
+        )
+        self.joint_err[k] = d.qpos[pm.qpos_adr] - q1
+        # torso's vertical axis, simulated and reference (FK of the reference frame)
+        set_configuration(dref, ref.root[k], q1, pm.qpos_adr)
+        mujoco.mj_kinematics(m, dref)
+        mujoco.mj_kinematics(m, d)  # after mj_step, xmat still holds the step's start
+        z_sim = d.xmat[pm.torso_body].reshape(3, 3)[:, 2]
+        z_ref = dref.xmat[pm.torso_body].reshape(3, 3)[:, 2]
+        cos = max(-1.0, min(1.0, float(np.dot(z_sim, z_ref))))
+        self.tilt_deg[k] = math.degrees(math.acos(cos))
+
+    def fallen(self, k: int, fall_height: float, fall_tilt: float) -> bool:
+        """Whether frame ``k`` has fallen: pelvis ``fall_height`` [m] low or tilt > ``fall_tilt``.
+
+        The pelvis is compared with the reference's height, the torso's tilt [rad] with the
+        reference torso's vertical axis.
+        """
+        down = self.pelvis_height_ref[k] - self.pelvis_height[k] > fall_height
+        return bool(down or math.radians(self.tilt_deg[k]) > fall_tilt)
+
+    def series(self, fallen_at: int | None, wall: float) -> ReplaySeries:
+        """The recorded series."""
+        pm, t = self.pm, self.ref.t
+        return ReplaySeries(
+            t=t,
+            assisted=self.assisted,
+            simulated=self.simulated,
+            fallen_at=fallen_at,
+            **{name: getattr(self, name) for name in _SERIES},
+            ref_contacts=self.ref.contacts,
+            joint_names=list(pm.joint_names),
+            foot_names=list(pm.foot_names),
+            mass=pm.mass,
+            floor_height=self.floor,
+            wall_time_s=wall,
+            sim_time_s=float(t[self.simulated - 1] - t[0]),
+            contacts_assumed=self.ref.contacts_assumed,
+        )
+
+
 def replay_run(
     traj: Any,
     pm: PhysicsModel,
@@ -265,184 +547,24 @@ def replay_run(
     fall_tilt = math.radians(FALL_TILT_DEG if fall_tilt_deg is None else fall_tilt_deg)
     cols = joint_columns(traj, pm)
     mujoco = import_mujoco()
-    m = pm.model
-    t = np.asarray(traj.t, float)
-    T, n, F = len(t), len(pm.joint_names), len(pm.foot_names)
-    q_all = np.asarray(traj.q, float)
-    v_all = np.asarray(traj.v, float)
-    root_ref = q_all[:, :7]
-    qj_ref = q_all[:, 7:][:, cols]
-    vj_ref = v_all[:, 6:][:, cols] if v_all.shape == (T, 6 + n) else np.zeros((T, n))
-    vb_ref = v_all[:, :6] if v_all.shape == (T, 6 + n) else np.zeros((T, 6))
-    contacts = np.asarray(traj.contacts, bool) if traj.contacts is not None else None
-    ref_contacts = np.ones((T, F), bool)
-    contacts_assumed = True
-    if contacts is not None and contacts.shape == (T, len(traj.foot_names)) and F:
-        ref_contacts = np.zeros((T, F), bool)
-        for i, name in enumerate(pm.foot_names):
-            if name in traj.foot_names:
-                ref_contacts[:, i] = contacts[:, list(traj.foot_names).index(name)]
-        contacts_assumed = False
-
-    if feedforward not in FEEDFORWARDS:
-        raise PhysicsInputError(
-            f"unknown feed-forward {feedforward!r}; choose from {', '.join(FEEDFORWARDS)}."
-        )
-    if feedforward == "gravity" and pm.robot is not None:
-        tau_ff = gravity_feedforward(pm, root_ref, qj_ref, ref_contacts)
-    else:
-        tau_ff = np.zeros((T, n))
-    pm.apply_gains()
-    d = mujoco.MjData(m)
-    dref = mujoco.MjData(m)
-    d.eq_active[pm.assist_eq] = 1 if assisted else 0
-    mocap = pm.assist_mocap
-    eq_type = mujoco.mjtConstraint.mjCNSTR_EQUALITY
-    set_configuration(d, root_ref[0], qj_ref[0], pm.qpos_adr)
-    floor = _floor_height(pm, d, mujoco)
-    m.geom_pos[pm.floor_geom] = [0.0, 0.0, floor]
-    R0 = _quat_to_mat(_wxyz(root_ref[0]))
-    d.qvel[:] = 0.0
-    d.qvel[0:3] = R0 @ vb_ref[0, :3]
-    d.qvel[3:6] = vb_ref[0, 3:6]
-    d.qvel[pm.dof_adr] = vj_ref[0]
-    d.mocap_pos[mocap] = root_ref[0, :3]
-    d.mocap_quat[mocap] = _wxyz(root_ref[0])
-    mujoco.mj_forward(m, d)
-    mass = pm.mass
-
-    nan = np.full(T, np.nan)
-    pelvis_h, pelvis_h_ref = nan.copy(), root_ref[:, 2].copy()
-    tilt, pos_err, ori_err = nan.copy(), nan.copy(), nan.copy()
-    joint_err = np.full((T, n), np.nan)
-    saturated = np.zeros((T, n), bool)
-    foot_force = np.full((T, F), np.nan)
-    other_force = nan.copy()
-    assist_f, assist_n, assist_h = nan.copy(), nan.copy(), nan.copy()
-    pelvis_h[0], tilt[0], pos_err[0], ori_err[0] = d.qpos[2], 0.0, 0.0, 0.0
-    joint_err[0] = d.qpos[pm.qpos_adr] - qj_ref[0]
-    foot_force[0], other_force[0] = np.nan, np.nan
-    kp, kd, effort = pm.kp, pm.kd, pm.effort
-    ratio = kd / kp
-    qadr, dadr = pm.qpos_adr, pm.dof_adr
-    h0 = float(m.opt.timestep)
-    torso = pm.torso_body
-    foot_of_body, geom_body = pm.foot_of_body, m.geom_bodyid
-    f6 = np.zeros(6)
+    ref = _reference(traj, pm, cols)
+    T = len(ref.t)
+    sim = _Replay(pm, mujoco, ref, _feedforward(pm, ref, feedforward), assisted)
     fallen_at: int | None = None
-    simulated = 1
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=T - 1, unit="frame", desc="assisted" if assisted else "physics")
+    bar = _progress_bar(T - 1, "assisted" if assisted else "physics") if progress else None
     t0 = time.perf_counter()
     for k in range(1, T):
         if bar is not None:
             bar.update(1)
-        dt = float(t[k] - t[k - 1])
-        n_sub = max(1, int(round(dt / h0)))
-        m.opt.timestep = dt / n_sub
-        q0, q1 = qj_ref[k - 1], qj_ref[k]
-        vff = vj_ref[k]
-        f0, f1 = tau_ff[k - 1], tau_ff[k]
-        p0, p1 = root_ref[k - 1, :3], root_ref[k, :3]
-        r0, r1 = _wxyz(root_ref[k - 1]), _wxyz(root_ref[k])
-        if float(np.dot(r0, r1)) < 0.0:
-            r1 = -r1
-        sat = np.zeros(n, bool)
-        ff = np.zeros(F)
-        fo = 0.0
-        af = ah = an = 0.0
-        for j in range(n_sub):
-            a = j / n_sub
-            qr = q0 + a * (q1 - q0)
-            tff = f0 + a * (f1 - f0)
-            u = kp * (qr - d.qpos[qadr]) + kd * (vff - d.qvel[dadr]) + tff  # eq. 1, unclamped
-            sat |= np.abs(u) >= effort
-            d.ctrl[:] = qr + ratio * vff + tff / kp  # position actuators apply eq. 1, clamped
-            if assisted:
-                rr = r0 + a * (r1 - r0)
-                d.mocap_pos[mocap] = p0 + a * (p1 - p0)
-                d.mocap_quat[mocap] = rr / np.linalg.norm(rr)
-            mujoco.mj_step(m, d)
-            if assisted:  # the weld's constraint force: 3 force rows, 3 torque rows
-                rows = (d.efc_type == eq_type) & (d.efc_id == pm.assist_eq)
-                w = d.efc_force[rows]
-                if len(w) == 6:  # rows in world axes: x y z force, then torque
-                    af += float(np.linalg.norm(w[:3]))
-                    ah += float(np.linalg.norm(w[:2]))
-                    an += float(np.linalg.norm(w[3:]))
-            for c in range(d.ncon):
-                con = d.contact[c]
-                g1, g2 = int(con.geom1), int(con.geom2)
-                if g1 == pm.floor_geom:
-                    other = g2
-                elif g2 == pm.floor_geom:
-                    other = g1
-                else:
-                    continue
-                mujoco.mj_contactForce(m, d, c, f6)
-                foot = foot_of_body[geom_body[other]]
-                if foot >= 0:
-                    ff[foot] += f6[0]
-                else:
-                    fo += f6[0]
-        m.opt.timestep = h0
-        simulated = k + 1
-        saturated[k] = sat
-        foot_force[k] = ff / n_sub
-        other_force[k] = fo / n_sub
-        if assisted:
-            assist_f[k], assist_n[k] = af / n_sub, an / n_sub
-            assist_h[k] = ah / n_sub
-        qb = d.qpos[3:7]
-        pelvis_h[k] = d.qpos[2]
-        pos_err[k] = float(np.linalg.norm(d.qpos[0:3] - p1))
-        conj = np.array([qb[0], -qb[1], -qb[2], -qb[3]])
-        ori_err[k] = math.degrees(float(np.linalg.norm(_quat_log(_quat_mul(conj, r1)))))
-        joint_err[k] = d.qpos[qadr] - q1
-        # torso's vertical axis, simulated and reference (FK of the reference frame)
-        set_configuration(dref, root_ref[k], q1, qadr)
-        mujoco.mj_kinematics(m, dref)
-        mujoco.mj_kinematics(m, d)  # after mj_step, xmat still holds the step's start
-        z_sim = d.xmat[torso].reshape(3, 3)[:, 2]
-        z_ref = dref.xmat[torso].reshape(3, 3)[:, 2]
-        tilt[k] = math.degrees(math.acos(max(-1.0, min(1.0, float(np.dot(z_sim, z_ref))))))
-        down = pelvis_h_ref[k] - pelvis_h[k] > fall_height
-        if fallen_at is None and (down or math.radians(tilt[k]) > fall_tilt):
+        sim.frame(k)
+        if fallen_at is None and sim.fallen(k, fall_height, fall_tilt):
             fallen_at = k
             if stop_on_fall:
                 break
     wall = time.perf_counter() - t0
     if bar is not None:
         bar.close()
-    return ReplaySeries(
-        t=t,
-        assisted=assisted,
-        simulated=simulated,
-        fallen_at=fallen_at,
-        pelvis_height=pelvis_h,
-        pelvis_height_ref=pelvis_h_ref,
-        tilt_deg=tilt,
-        root_pos_err=pos_err,
-        root_ori_err_deg=ori_err,
-        joint_err=joint_err,
-        saturated=saturated,
-        foot_force=foot_force,
-        other_force=other_force,
-        assist_force=assist_f,
-        assist_torque=assist_n,
-        assist_horizontal=assist_h,
-        ref_contacts=ref_contacts,
-        joint_names=list(pm.joint_names),
-        foot_names=list(pm.foot_names),
-        mass=mass,
-        floor_height=floor,
-        wall_time_s=wall,
-        sim_time_s=float(t[simulated - 1] - t[0]),
-        contacts_assumed=contacts_assumed,
-    )
+    return sim.series(fallen_at, wall)
 
 
 def robot_of_run(traj: Any) -> Any:
