@@ -37,6 +37,7 @@ from .gains import (
     GENERIC_ZETA,
     STIFF_DAMPING_TIME,
     STIFF_ERROR_AT_LIMIT,
+    GainProfile,
 )
 
 #: Oldest mujoco with the model-editing API used here (``MjSpec.joint(name)``); tested with
@@ -209,27 +210,12 @@ def _resolve_mesh(filename: str, urdf: Path) -> Path | None:
     return p if p.is_file() else None
 
 
-def rewrite_urdf(urdf: Path) -> tuple[str, list[str]]:
-    """URDF text MuJoCo can import: absolute mesh paths, no visuals, no simulator extensions.
-
-    Returns:
-        The text and the list of changes made (for the report).
+def _drop_visuals_resolve_meshes(root: ET.Element, urdf: Path) -> int:
+    """Remove every link's ``<visual>``; make collision mesh paths absolute; the visuals dropped.
 
     Raises:
-        PhysicsModelError: a collision mesh that is missing or in a format MuJoCo does not read,
-            naming its link and file.
+        PhysicsModelError: a collision mesh that is missing or in a format MuJoCo does not read.
     """
-    try:
-        tree = ET.parse(urdf)
-    except (OSError, ET.ParseError) as exc:
-        raise PhysicsModelError(f"{urdf}: not a readable URDF ({exc}).") from None
-    root = tree.getroot()
-    notes: list[str] = []
-    dropped = {"gazebo": 0, "transmission": 0, "mujoco": 0}
-    for tag in dropped:
-        for el in root.findall(tag):
-            root.remove(el)
-            dropped[tag] += 1
     n_visual = 0
     for link in root.findall("link"):
         for vis in link.findall("visual"):
@@ -253,6 +239,31 @@ def rewrite_urdf(urdf: Path) -> tuple[str, list[str]]:
                         "Convert it (e.g. with trimesh) and point the URDF at the copy."
                     )
                 mesh.set("filename", str(path))
+    return n_visual
+
+
+def rewrite_urdf(urdf: Path) -> tuple[str, list[str]]:
+    """URDF text MuJoCo can import: absolute mesh paths, no visuals, no simulator extensions.
+
+    Returns:
+        The text and the list of changes made (for the report).
+
+    Raises:
+        PhysicsModelError: a collision mesh that is missing or in a format MuJoCo does not read,
+            naming its link and file.
+    """
+    try:
+        tree = ET.parse(urdf)
+    except (OSError, ET.ParseError) as exc:
+        raise PhysicsModelError(f"{urdf}: not a readable URDF ({exc}).") from None
+    root = tree.getroot()
+    notes: list[str] = []
+    dropped = {"gazebo": 0, "transmission": 0, "mujoco": 0}
+    for tag in dropped:
+        for el in root.findall(tag):
+            root.remove(el)
+            dropped[tag] += 1
+    n_visual = _drop_visuals_resolve_meshes(root, urdf)
     if n_visual:
         notes.append(f"dropped {n_visual} <visual> elements (not simulated)")
     for tag, n in dropped.items():
@@ -296,27 +307,13 @@ def _body_of_frame(robot: Any, frame: str, mj_model: Any, mujoco: Any, root_body
     return int(mj_model.jnt_bodyid[j])
 
 
-def build_physics_model(
-    robot: Any,
-    *,
-    gains: str | None = None,
-    timestep: float = DEFAULT_TIMESTEP,
-    self_collision: bool = False,
-) -> PhysicsModel:
-    """Build the MuJoCo model of ``robot`` (a :class:`~qpretarget.robot.RobotModel`).
-
-    Args:
-        robot: the robot the run was retargeted with (``load_robot(config["robot"])``).
-        gains: a :data:`~qpretarget.physics.gains.GAIN_PROFILES` name; ``None``: ``stiff``.
-        timestep: physics time step [s].
-        self_collision: robot-robot contacts on (off: robot against the floor only).
+def _gain_profile(robot: Any, gains: str | None, timestep: float) -> GainProfile:
+    """The :class:`~qpretarget.physics.gains.GainProfile` to build with, options checked.
 
     Raises:
-        MissingDependencyError: mujoco is not installed (one-line install hint).
-        PhysicsModelError: the URDF does not convert (the message names the element), or the
-            robot has no floating base.
+        PhysicsModelError: a fixed-base robot, a time step outside (0, 0.05] s, an unknown gain
+            profile or one written for another robot.
     """
-    mujoco = import_mujoco()
     if not robot.free_flyer:
         raise PhysicsModelError(
             f"robot {robot.name!r} has a fixed base; the physics check replays floating-base "
@@ -337,7 +334,15 @@ def build_physics_model(
             f"gain profile {profile_name!r} is written for {', '.join(profile.robots)}, not "
             f"{robot.name!r}; use --physics-gains stiff or generic."
         )
-    urdf = Path(robot.urdf_path)
+    return profile
+
+
+def _import_urdf(mujoco: Any, urdf: Path) -> tuple[Any, Any, list[str]]:
+    """``(spec, base body, notes)``: the rewritten URDF imported, a free joint on its root link.
+
+    Raises:
+        PhysicsModelError: MuJoCo's importer rejects it, or it has more than one root link.
+    """
     text, notes = rewrite_urdf(urdf)
     try:
         spec = mujoco.MjSpec.from_string(text)
@@ -352,6 +357,11 @@ def build_physics_model(
         )
     base = roots[0]
     base.add_freejoint(name="floating_base")
+    return spec, base, notes
+
+
+def _add_world(spec: Any, mujoco: Any, base: Any, timestep: float, self_collision: bool) -> None:
+    """Time step and integrator, contact filtering, the floor and the (inactive) assisting weld."""
     spec.option.timestep = float(timestep)
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     # Contacts: robot geoms (contype 1) touch the floor (conaffinity 1) only, unless
@@ -381,6 +391,21 @@ def build_physics_model(
     weld.solref = [ASSIST_TIMECONST, 1.0]
     weld.solimp[:3] = [ASSIST_IMPEDANCE, ASSIST_IMPEDANCE, 0.001]
     weld.active = False
+
+
+def _add_actuated_joints(
+    spec: Any, mujoco: Any, robot: Any, profile: GainProfile, urdf: Path
+) -> tuple[list[tuple[float, float] | None], np.ndarray, list[str]]:
+    """Passive joint terms, torque limits and one actuator per joint of ``robot``.
+
+    Returns:
+        ``(gains, effort, effort_missing)``: the profile's ``(kp, kd)`` per joint (``None`` where
+        a rule computes them after compiling), the URDF effort limits [N m] (``inf`` where
+        missing) and the joints without one.
+
+    Raises:
+        PhysicsModelError: a joint missing from the MuJoCo model or from a gain table.
+    """
     pin_model = robot.model
     generic = profile.rule != "table"
     gain_list: list[tuple[float, float] | None] = []
@@ -410,14 +435,24 @@ def build_physics_model(
         effort[i] = e
         act = spec.add_actuator(name=jname, target=jname)
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
-    try:
-        m = spec.compile()
-    except Exception as exc:
-        raise PhysicsModelError(f"{urdf.name}: MuJoCo could not compile the model: {exc}") from None
-    qpos_adr = np.array([m.jnt_qposadr[m.joint(n).id] for n in robot.joint_names], dtype=int)
-    dof_adr = np.array([m.jnt_dofadr[m.joint(n).id] for n in robot.joint_names], dtype=int)
-    kp = np.zeros(len(robot.joint_names))
-    kd = np.zeros(len(robot.joint_names))
+    return gain_list, effort, effort_missing
+
+
+def _pd_gains(
+    m: Any,
+    profile: GainProfile,
+    gain_list: list[tuple[float, float] | None],
+    effort: np.ndarray,
+    dof_adr: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(kp, kd)`` per joint: the profile's table, else its rule (on the compiled model ``m``).
+
+    The ``effort`` rule makes a stiff servo (full effort at ``STIFF_ERROR_AT_LIMIT``); the
+    ``generic`` rule sets a natural frequency and damping ratio on the joint's apparent inertia
+    (``dof_M0``, computed at compile time).
+    """
+    kp = np.zeros(len(gain_list))
+    kd = np.zeros(len(gain_list))
     for i, gl in enumerate(gain_list):
         if gl is not None:
             kp[i], kd[i] = gl
@@ -429,15 +464,11 @@ def build_physics_model(
             inertia = float(m.dof_M0[dof_adr[i]])
             kp[i] = inertia * GENERIC_OMEGA**2
             kd[i] = 2.0 * GENERIC_ZETA * inertia * GENERIC_OMEGA
-    root_body = int(m.body(base.name).id)
-    torso_frame = robot.keyframes.get("torso", robot.keyframes.get("pelvis"))
-    torso_body = (
-        _body_of_frame(robot, torso_frame, m, mujoco, root_body) if torso_frame else root_body
-    )
-    foot_names = list(robot.feet)
-    foot_bodies = [
-        _body_of_frame(robot, f.frame, m, mujoco, root_body) for f in robot.feet.values()
-    ]
+    return kp, kd
+
+
+def _foot_of_body(m: Any, foot_bodies: list[int]) -> np.ndarray:
+    """Body id -> index of the foot it belongs to (a foot's descendants too), ``-1`` elsewhere."""
     foot_of_body = np.full(m.nbody, -1, dtype=int)
     for b in range(1, m.nbody):  # a foot's descendants (toes, sole links) belong to it
         a = b
@@ -446,6 +477,59 @@ def build_physics_model(
                 foot_of_body[b] = foot_bodies.index(a)
                 break
             a = int(m.body_parentid[a])
+    return foot_of_body
+
+
+def _key_bodies(robot: Any, m: Any, mujoco: Any, base_name: str) -> tuple[int, int, list[int]]:
+    """``(root body, torso body, foot bodies)`` of the compiled model ``m``.
+
+    The torso is the body of the ``torso`` key-point (else ``pelvis``, else the root).
+    """
+    root_body = int(m.body(base_name).id)
+    torso_frame = robot.keyframes.get("torso", robot.keyframes.get("pelvis"))
+    torso_body = (
+        _body_of_frame(robot, torso_frame, m, mujoco, root_body) if torso_frame else root_body
+    )
+    foot_bodies = [
+        _body_of_frame(robot, f.frame, m, mujoco, root_body) for f in robot.feet.values()
+    ]
+    return root_body, torso_body, foot_bodies
+
+
+def build_physics_model(
+    robot: Any,
+    *,
+    gains: str | None = None,
+    timestep: float = DEFAULT_TIMESTEP,
+    self_collision: bool = False,
+) -> PhysicsModel:
+    """Build the MuJoCo model of ``robot`` (a :class:`~qpretarget.robot.RobotModel`).
+
+    Args:
+        robot: the robot the run was retargeted with (``load_robot(config["robot"])``).
+        gains: a :data:`~qpretarget.physics.gains.GAIN_PROFILES` name; ``None``: ``stiff``.
+        timestep: physics time step [s].
+        self_collision: robot-robot contacts on (off: robot against the floor only).
+
+    Raises:
+        MissingDependencyError: mujoco is not installed (one-line install hint).
+        PhysicsModelError: the URDF does not convert (the message names the element), or the
+            robot has no floating base.
+    """
+    mujoco = import_mujoco()
+    profile = _gain_profile(robot, gains, timestep)
+    urdf = Path(robot.urdf_path)
+    spec, base, notes = _import_urdf(mujoco, urdf)
+    _add_world(spec, mujoco, base, timestep, self_collision)
+    gain_list, effort, effort_missing = _add_actuated_joints(spec, mujoco, robot, profile, urdf)
+    try:
+        m = spec.compile()
+    except Exception as exc:
+        raise PhysicsModelError(f"{urdf.name}: MuJoCo could not compile the model: {exc}") from None
+    qpos_adr = np.array([m.jnt_qposadr[m.joint(n).id] for n in robot.joint_names], dtype=int)
+    dof_adr = np.array([m.jnt_dofadr[m.joint(n).id] for n in robot.joint_names], dtype=int)
+    kp, kd = _pd_gains(m, profile, gain_list, effort, dof_adr)
+    root_body, torso_body, foot_bodies = _key_bodies(robot, m, mujoco, base.name)
     pm = PhysicsModel(
         model=m,
         robot_name=robot.name,
@@ -459,9 +543,9 @@ def build_physics_model(
         gains_source=profile.source,
         root_body=root_body,
         torso_body=torso_body,
-        foot_names=foot_names,
+        foot_names=list(robot.feet),
         foot_bodies=foot_bodies,
-        foot_of_body=foot_of_body,
+        foot_of_body=_foot_of_body(m, foot_bodies),
         floor_geom=int(m.geom("floor").id),
         assist_eq=int(m.equality("assist").id),
         assist_mocap=int(m.body_mocapid[m.body("assist_target").id]),

@@ -629,19 +629,27 @@ def check_run(
         else None
     )
     if pm.robot is not None:
-        from .zmp import reference_zmp_margin
-
-        robot = pm.robot
-        T = len(traj.t)
-        q = np.tile(np.asarray(robot.q_reference, float), (T, 1))
-        q[:, :7] = np.asarray(traj.q)[:, :7]
-        q[:, robot.joint_q_index] = np.asarray(traj.q)[:, 7:][:, cols]
-        v = np.zeros((T, robot.nv))
-        if np.shape(traj.v) == (T, robot.nv):
-            v[:, :6] = np.asarray(traj.v)[:, :6]
-            v[:, robot.joint_v_index] = np.asarray(traj.v)[:, 6:][:, cols]
-        zmp_margin = reference_zmp_margin(
-            robot, np.asarray(traj.t, float), q, v, free.ref_contacts, free.floor_height
-        )[1]
-        free.ref_zmp_margin = zmp_margin
+        free.ref_zmp_margin = _reference_zmp_margin(traj, pm.robot, cols, free)
     return summarize(free, helped, pm), free, helped
+
+
+def _reference_zmp_margin(
+    traj: Any, robot: Any, cols: np.ndarray, free: ReplaySeries
+) -> np.ndarray:
+    """The run's reference ZMP margin (T,) [m] on the replay's stance feet and floor.
+
+    The run's q and v are written into ``robot``'s configuration order (joints by name).
+    """
+    from .zmp import reference_zmp_margin
+
+    T = len(traj.t)
+    q = np.tile(np.asarray(robot.q_reference, float), (T, 1))
+    q[:, :7] = np.asarray(traj.q)[:, :7]
+    q[:, robot.joint_q_index] = np.asarray(traj.q)[:, 7:][:, cols]
+    v = np.zeros((T, robot.nv))
+    if np.shape(traj.v) == (T, robot.nv):
+        v[:, :6] = np.asarray(traj.v)[:, :6]
+        v[:, robot.joint_v_index] = np.asarray(traj.v)[:, 6:][:, cols]
+    return reference_zmp_margin(
+        robot, np.asarray(traj.t, float), q, v, free.ref_contacts, free.floor_height
+    )[1]
