@@ -36,13 +36,6 @@ def test_two_processes_give_bit_identical_q(tmp_path, repo_dir, mocap_dir, clip)
     assert np.array_equal(qs[0], qs[1]), f"max difference {np.abs(qs[0] - qs[1]).max():.3e}"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="collision/model.py: CollisionModel.invalidate() (DistanceDamper.reset) keeps the "
-    "pinocchio GeometryData whose coal distance results carry GJK warm-start guesses, so the "
-    "first tick after reset gets other witness points (row gradients 0.016 apart); rebuilding "
-    "gdata there (createData, signed distances, _results, _mask_key) makes this pass",
-)
 def test_a_run_from_reset_repeats_to_the_bit(repo_dir):
     """In one process, one controller: 300 ticks of seeded wild targets (collision rows in play,
     slack slots growing), reset, the same 300 ticks: the same q, bit for bit."""

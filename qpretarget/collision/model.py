@@ -188,10 +188,24 @@ class CollisionModel:
         self._gb = np.array([index[b] for _, b in self.pairs], dtype=int)
         for a, b in zip(self._ga, self._gb, strict=True):
             self.gmodel.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+        self._new_geometry_data()
+
+    def _new_geometry_data(self) -> None:
+        """Fresh geometry data: every pair active, signed distances, no GJK warm start.
+
+        coal keeps each pair's last witness points as the next query's initial guess, so data
+        that lived through earlier ticks gives other witness points (same distance, other row
+        gradients) than fresh data: a run after :meth:`invalidate` (``Controller.reset``) must
+        start from fresh data to repeat a first run bit for bit.
+        """
         self.gdata = self.gmodel.createData()
         for req in self.gdata.distanceRequests:
             req.enable_signed_distance = True
         self._results = list(self.gdata.distanceResults)
+        self._flags = np.ones(self.n_pairs, dtype=bool)  # mirrors gdata.activeCollisionPairs
+        self._flag_bytes = self._flags.tobytes()
+        self._idx = np.arange(self.n_pairs)
+        self._idx_list = self._idx.tolist()
 
     def _build_levers(self, model: pin.Model) -> None:
         """Supports and lever bounds of every body and pair (the broad phase's bound)."""
@@ -217,10 +231,6 @@ class CollisionModel:
 
     def _init_buffers(self, model: pin.Model) -> None:
         """Per-pair state of the broad phase and the results of :meth:`update`."""
-        self._flags = np.ones(self.n_pairs, dtype=bool)  # mirrors gdata.activeCollisionPairs
-        self._flag_bytes = self._flags.tobytes()
-        self._idx = np.arange(self.n_pairs)
-        self._idx_list = self._idx.tolist()
         self._thr = np.full(self.n_pairs, np.inf)
         self._thr_key: tuple[float, bytes | float] = (np.nan, np.nan)
         self._mask_key = b""
@@ -250,6 +260,16 @@ class CollisionModel:
     def invalidate(self) -> None:
         """Forget the temporal-coherence bounds (next :meth:`update` computes every pair)."""
         self._fresh = True
+
+    def reset(self) -> None:
+        """A new run starts: :meth:`invalidate` and forget coal's warm starts too.
+
+        The next :meth:`update` computes every pair on fresh geometry data, so a run after
+        ``Controller.reset`` repeats a first run to the bit.
+        """
+        self._new_geometry_data()
+        self._thr_key = (np.nan, np.nan)
+        self.invalidate()
 
     def update(
         self,

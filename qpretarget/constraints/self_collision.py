@@ -222,7 +222,7 @@ class DistanceDamper(Constraint):
 
     def reset(self, state: RobotState) -> None:
         if self.model is not None:
-            self.model.invalidate()
+            self.model.reset()  # fresh geometry data: a run from reset repeats to the bit
         self._fp_state = None
         self._scale.fill(1.0)
         self._sqrt_scale.fill(1.0)

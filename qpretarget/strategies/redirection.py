@@ -187,7 +187,7 @@ class Redirection(Strategy):
     def reset(self) -> None:
         super().reset()
         if self._bound:
-            self.collision.invalidate()
+            self.collision.reset()
 
     def collision_points(
         self, state: RobotState
