@@ -11,9 +11,10 @@ sample k -> solve -> integrate -> kinematics, one ``Controller.step`` timed with
 interleaved pass by pass so that the machine's load drifts alike on both.
 
 Printed per pair set: median, p95 and p99 tick time [µs] over every timed tick, the collision
-block's median [µs], exact pair distances computed per tick (broad phase) and QP rows with a
-bound (median / max), hand RMSE [mm], and the mesh audit of the last pass over every pair
-(:func:`qpretarget.analysis.mesh_audit.audit_self_collision`: penetrating frames, minimum
+block's median [µs] and its part in coal's distance calls (GJK/EPA, C++), the QP solve's median
+[µs] (``StepResult.solve_time``), exact pair distances computed per tick (broad phase) and QP
+rows with a bound (median / max), hand RMSE [mm], and the mesh audit of the last pass over every
+pair (:func:`qpretarget.analysis.mesh_audit.audit_self_collision`: penetrating frames, minimum
 distance).
 
 Usage:
@@ -67,7 +68,7 @@ def run_pass(ctrl: Controller, tg: Any, targets: list[dict[str, Any]]) -> dict[s
     n = len(targets)
     ctrl.reset(np.asarray(tg["q_init"], dtype=float))
     ctrl.task("posture").set_target(tg["q_nominal"])
-    out = {k: np.zeros(n) for k in ("tick", "collision", "computed", "rows")}
+    out = {k: np.zeros(n) for k in ("tick", "collision", "gjk", "solve", "computed", "rows")}
     q = np.zeros((n + 1, ctrl.robot.nq))
     q[0] = tg["q_init"]
     for k in range(n):
@@ -76,6 +77,8 @@ def run_pass(ctrl: Controller, tg: Any, targets: list[dict[str, Any]]) -> dict[s
         out["tick"][k] = time.perf_counter() - t0
         q[k + 1] = res.q
         out["collision"][k] = col.last_time
+        out["gjk"][k] = col.model.last_gjk_time
+        out["solve"][k] = res.solve_time
         out["computed"][k] = col.model.last_n_computed
         out["rows"][k] = col._row_pairs.size
     out["q"] = q
@@ -128,15 +131,18 @@ def main() -> None:
     print()
     print(
         "| pairs | candidate pairs | QP rows | median µs | p95 µs | p99 µs | collision µs "
-        "(median) | distances computed per tick (median / max) | rows with a bound (median / max) "
-        "| hand RMSE mm | mesh audit: penetrating frames / min distance mm |"
+        "(median) | of which GJK µs (median) | QP solve µs (median) | distances computed per tick "
+        "(median / max) | rows with a bound (median / max) | hand RMSE mm | mesh audit: "
+        "penetrating frames / min distance mm |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---|---|---:|---|")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|---|")
     med = {}
     for s in sets:
         c = next(x for x in ctrls[s].constraints if x.type_name == "self_collision")
         tick = np.concatenate([r["tick"] for r in runs[s]]) * 1e6
         colt = np.concatenate([r["collision"] for r in runs[s]]) * 1e6
+        gjk = np.concatenate([r["gjk"] for r in runs[s]]) * 1e6
+        solve = np.concatenate([r["solve"] for r in runs[s]]) * 1e6
         comp = np.concatenate([r["computed"] for r in runs[s]])
         rows = np.concatenate([r["rows"] for r in runs[s]])
         q = runs[s][-1]["q"]
@@ -144,7 +150,8 @@ def main() -> None:
         med[s] = float(np.median(tick))
         print(
             f"| {s} | {len(c.pairs)} | {c.n_rows} | {med[s]:.0f} | {np.percentile(tick, 95):.0f} | "
-            f"{np.percentile(tick, 99):.0f} | {np.median(colt):.0f} | "
+            f"{np.percentile(tick, 99):.0f} | {np.median(colt):.0f} | {np.median(gjk):.0f} | "
+            f"{np.median(solve):.0f} | "
             f"{np.median(comp):.0f} / {comp.max():.0f} | "
             f"{np.median(rows):.0f} / {rows.max():.0f} | "
             f"{hand_rmse_mm(ctrls[s], wl, tg, q):.2f} | "

@@ -243,6 +243,7 @@ class CollisionModel:
         self._q_last = np.zeros(model.nq)
         self._fresh = True
         self._zero = np.zeros(self.n_pairs)
+        self._no_distance = np.zeros(0)
         self._cut = np.inf  # ranked updates: last K-th smallest gap + rank_margin
         #: Margin added to the last call's K-th smallest gap to make the next cut [m].
         self.rank_margin = 0.005
@@ -252,8 +253,10 @@ class CollisionModel:
         self._sel: list[Any] = []
         self._pa: np.ndarray | None = np.zeros((0, 3))
         self._n: np.ndarray | None = np.zeros((0, 3))
-        #: Time spent in the last :meth:`update` [s] and number of exact pair distances.
+        #: Time spent in the last :meth:`update` [s], of which in coal's distance calls
+        #: (``computeDistances``: GJK/EPA in C++) [s], and the number of exact pair distances.
         self.last_update_time = 0.0
+        self.last_gjk_time = 0.0
         self.last_n_computed = 0
 
     # ------------------------------------------------------------------ per tick
@@ -327,42 +330,48 @@ class CollisionModel:
         need = cand & (lb - off < self._cut) if ranked else cand
         self._set_flags(need)
         placed = False
+        t_gjk = 0.0
+        res = self._results
+        d = self._no_distance  # exact distances of the pairs self._idx, read once
         if self._idx.size:
             pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
             placed = True
+            t1 = time.perf_counter()
             pin.computeDistances(self.gmodel, self.gdata)
-            lb[self._idx] = [self._results[i].min_distance for i in self._idx_list]
+            t_gjk = time.perf_counter() - t1
+            d = np.array([res[i].min_distance for i in self._idx_list])
+            lb[self._idx] = d
         if ranked and nearest is not None:
-            g = lb[self._idx] - off[self._idx]
-            found = int(np.count_nonzero((g < self._cut) & (lb[self._idx] < influence)))
+            g = d - off[self._idx]
+            found = int(np.count_nonzero((g < self._cut) & (d < influence)))
             if found < nearest and (cand & ~need).any():  # second round: every candidate
                 self._set_flags(cand)
                 if not placed:
                     pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
+                t1 = time.perf_counter()
                 pin.computeDistances(self.gmodel, self.gdata)
-                lb[self._idx] = [self._results[i].min_distance for i in self._idx_list]
+                t_gjk += time.perf_counter() - t1
+                d = np.array([res[i].min_distance for i in self._idx_list])
+                lb[self._idx] = d
+        idx = self._idx
+        close = d < influence
+        act = idx[close]
         if nearest is not None:  # next call's cut: this K-th smallest gap + rank_margin
-            close = lb[self._idx] < influence
-            g = lb[self._idx][close] - off[self._idx][close]
+            g = d[close] - off[act]
             self._cut = (
                 float(np.partition(g, nearest - 1)[nearest - 1]) + self.rank_margin
                 if g.size >= nearest
                 else np.inf
             )
-        idx = self._idx
         self.exact = self._flags
-        act = idx
-        sel: list[Any] = []
-        if idx.size:
-            act = idx[lb[idx] < influence]
-            res = self._results
-            sel = [res[i] for i in act.tolist()]
+        sel = [res[i] for i in act.tolist()]
         self.active = act
         # Witness points and normals are read from the results on demand (:meth:`witnesses`):
         # each read crosses into C++, and capped rows need only the closest pairs'.
         self._sel = sel
         self._pa = self._n = None
         self.last_n_computed = int(idx.size)
+        self.last_gjk_time = t_gjk
         self.last_update_time = time.perf_counter() - t0
         return lb
 
@@ -372,8 +381,9 @@ class CollisionModel:
         if nb == self._flag_bytes:
             return
         gd = self.gdata
-        for i in np.flatnonzero(need != self._flags).tolist():
-            if need[i]:
+        flips = np.flatnonzero(need != self._flags)
+        for i, on in zip(flips.tolist(), need[flips].tolist(), strict=True):
+            if on:
                 gd.activateCollisionPair(i)
             else:
                 gd.deactivateCollisionPair(i)

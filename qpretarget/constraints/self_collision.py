@@ -195,6 +195,8 @@ class DistanceDamper(Constraint):
         self._last_rows = np.zeros(0, dtype=int)
         self._slot = np.full(P, -1)  # capped rows: QP row of each pair (-1: none)
         self._slot_pair = np.full(self.n_rows, -1)  # pair of each QP row (-1: free)
+        self._slots_key = b""  # pairs of the last _slots call, and their rows
+        self._slots_rows = np.zeros(0, dtype=int)
         self._last_pairs = np.zeros(0, dtype=int)
         self._gap = np.zeros(0)
         uniform = bool(np.all(self.safety == self.safety[0])) if P else True
@@ -233,6 +235,7 @@ class DistanceDamper(Constraint):
         self._last_rows = np.zeros(0, dtype=int)
         self._slot.fill(-1)
         self._slot_pair.fill(-1)
+        self._slots_key = b""
 
     def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
         """Remember the first-order prediction of the active pairs' next distances."""
@@ -266,7 +269,7 @@ class DistanceDamper(Constraint):
             pairs = act
             grad = model.gradients(state) if act.size else self._grad_act[:0]
         else:  # the pairs that get a row this tick (armed, closest max_rows)
-            sel = np.flatnonzero(self._row_mask(act))
+            sel = np.flatnonzero(self._row_mask(act)) if self.disarms_rows else np.arange(act.size)
             pairs = act[sel]
             if self.max_rows is not None and pairs.size > self.n_rows:
                 gap = model.distances[pairs] - self.safety[pairs]
@@ -365,6 +368,9 @@ class DistanceDamper(Constraint):
         A pair keeps its row while it stays among the closest, new pairs take the free rows, so
         the rows the solver's warm start remembers keep their meaning from tick to tick.
         """
+        key = pairs.tobytes()
+        if key == self._slots_key:  # the same pairs as last tick keep the same rows
+            return self._slots_rows
         slot, owner = self._slot, self._slot_pair
         held = owner >= 0
         if held.any():
@@ -379,7 +385,8 @@ class DistanceDamper(Constraint):
             free = np.flatnonzero(owner < 0)[: new.size]
             slot[new] = free
             owner[free] = new
-        return slot[pairs]
+        self._slots_key, self._slots_rows = key, slot[pairs]
+        return self._slots_rows
 
     @property
     def min_distance(self) -> float:

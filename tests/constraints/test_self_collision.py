@@ -273,3 +273,16 @@ def test_auto_rows_keep_their_slot(g1):
     again = con._slots(np.array([3, 9, 11]))  # 7 leaves, 11 arrives and takes 7's row
     assert first.tolist() == [0, 1, 2] and again.tolist() == [0, 2, 1]
     assert con._slots(np.array([11, 20, 30, 40])).tolist() == [1, 0, 2, 3]
+
+
+def test_auto_slots_repeat_and_reset(g1):
+    """The same row pairs as last tick keep their rows; a reset forgets them (fresh slots)."""
+    from qpretarget.robot import RobotState
+
+    con = SelfCollision(pairs="auto", max_rows=4)
+    con.bind(g1)
+    assert con._slots(np.array([3, 7, 9])).tolist() == [0, 1, 2]
+    assert con._slots(np.array([7, 9, 12])).tolist() == [1, 2, 0]  # 3 left, 12 took row 0
+    assert con._slots(np.array([7, 9, 12])).tolist() == [1, 2, 0]  # unchanged set: same rows
+    con.reset(RobotState(g1))
+    assert con._slots(np.array([7, 9, 12])).tolist() == [0, 1, 2]  # as in a fresh run
