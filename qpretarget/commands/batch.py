@@ -7,6 +7,11 @@ import argparse
 import os
 import sys
 
+from . import add_command, add_config, add_output, add_quiet
+
+SUMMARY = "retarget every clip of a dataset; export csv/pkl/npz; summary table"
+DESCRIPTION = "Retarget files, folders (recursive) or globs of BVH, ASF/AMC and C3D clips."
+
 HELP = """examples:
   qpretarget batch configs/g1_whole_body.yaml ../shared/data/mocap -o out \
       --format csv,pkl,npz --fps 30
@@ -25,16 +30,10 @@ npz (qpretarget run). See docs/datasets.md.
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``batch`` subcommand."""
-    p = sub.add_parser(
-        "batch",
-        help="retarget every clip of a dataset; export csv/pkl/npz; summary table",
-        description="Retarget files, folders (recursive) or globs of BVH, ASF/AMC and C3D clips.",
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("config", help="controller YAML with a `retarget:` section")
+    p = add_command(sub, "batch", help=SUMMARY, description=DESCRIPTION, examples=HELP)
+    add_config(p)
     p.add_argument("inputs", nargs="+", help="motion files, folders or glob patterns")
-    p.add_argument("-o", "--output", required=True, help="output folder")
+    add_output(p, "output folder")
     p.add_argument("--format", default="npz", help="comma-separated: csv, pkl, npz (default npz)")
     p.add_argument("--fps", type=float, default=None, help="output rate [Hz] (default: control)")
     p.add_argument("--workers", type=int, default=None, help="parallel clips (default: cores)")
@@ -48,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="replay each clip in MuJoCo (physics extra): <clip>.physics.json/.png, physics/* "
         "summary columns",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 

@@ -6,6 +6,11 @@ from __future__ import annotations
 import argparse
 import json
 
+from . import add_command, add_config
+
+SUMMARY = "ticks per second, median/p95 step and solve time, split by stage"
+DESCRIPTION = "Time Controller.step on scripted targets (warm-up, then timed passes)."
+
 HELP = """examples:
   qpretarget bench configs/g1_augmentation.yaml
   qpretarget bench configs/g1_whole_body.yaml --solvers proxsuite,daqp --ticks 2000
@@ -15,14 +20,8 @@ HELP = """examples:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``bench`` subcommand."""
-    p = sub.add_parser(
-        "bench",
-        help="ticks per second, median/p95 step and solve time, split by stage",
-        description="Time Controller.step on scripted targets (warm-up, then timed passes).",
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("config", help="controller YAML")
+    p = add_command(sub, "bench", help=SUMMARY, description=DESCRIPTION, examples=HELP)
+    add_config(p, "controller YAML")
     p.add_argument(
         "--solvers", default=None, help="comma-separated solvers (default: the config's)"
     )

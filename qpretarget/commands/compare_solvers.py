@@ -6,6 +6,15 @@ from __future__ import annotations
 import argparse
 import sys
 
+from . import add_command, add_config
+
+SUMMARY = "run the same motion with each QP solver and compare times, accuracy, failures"
+DESCRIPTION = (
+    "Run the same motion with each QP solver (closed loop, one controller per solver) and "
+    "print a table: median/p95 solve time, iterations, max constraint violation, tracking "
+    "RMSE and its difference to the reference solver, failures."
+)
+
 HELP = """examples:
   qpretarget compare-solvers configs/g1_augmentation.yaml scripted
       ProxSuite (native, warm-started) and every installed qpsolvers backend, 2 s scripted motion
@@ -22,18 +31,8 @@ retargeted for each solver through the config's retarget: section.
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``compare-solvers`` subcommand."""
-    p = sub.add_parser(
-        "compare-solvers",
-        help="run the same motion with each QP solver and compare times, accuracy, failures",
-        description=(
-            "Run the same motion with each QP solver (closed loop, one controller per solver) and "
-            "print a table: median/p95 solve time, iterations, max constraint violation, tracking "
-            "RMSE and its difference to the reference solver, failures."
-        ),
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("config", help="controller YAML")
+    p = add_command(sub, "compare-solvers", help=SUMMARY, description=DESCRIPTION, examples=HELP)
+    add_config(p, "controller YAML")
     p.add_argument("motion", help="'scripted[:SECONDS]', a run file (.npz) or a mocap file")
     p.add_argument(
         "--solvers",

@@ -14,6 +14,14 @@ import sys
 import time
 from pathlib import Path
 
+from . import add_command, add_quiet
+
+SUMMARY = "retarget the built-in human motion to G1 and print a summary"
+DESCRIPTION = (
+    "Retarget a built-in human motion (wave, reach across, squat, side step) to a bundled "
+    "robot with the whole-body controller; nothing to download."
+)
+
 HELP = """examples:
   qpretarget demo                       G1 imitates the built-in motion (10 s), prints a summary
   qpretarget demo -o demo_g1.npz        also write the run (qpretarget evaluate/view read it)
@@ -27,21 +35,12 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``demo`` subcommand."""
-    p = sub.add_parser(
-        "demo",
-        help="retarget the built-in human motion to G1 and print a summary",
-        description=(
-            "Retarget a built-in human motion (wave, reach across, squat, side step) to a bundled "
-            "robot with the whole-body controller; nothing to download."
-        ),
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command(sub, "demo", help=SUMMARY, description=DESCRIPTION, examples=HELP)
     p.add_argument("--robot", default="g1", help="bundled robot with feet (default g1)")
     p.add_argument("-o", "--output", default=None, help="write the run file (.npz)")
     p.add_argument("--seconds", type=float, default=None, help="length of the motion [s]")
     p.add_argument("--config", default=None, help="controller YAML (default: whole-body config)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 

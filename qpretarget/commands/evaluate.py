@@ -6,6 +6,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from . import add_command, add_output
+
+SUMMARY = "metrics (metrics.json) and figures of a saved run"
+DESCRIPTION = (
+    "Recompute the metrics of a run from its trajectory and robot model (tracking RMSE, "
+    "joint-limit and self-collision violations per frame, pair distances, CoM margin, "
+    "foot slip, velocity/acceleration/jerk peaks, average absolute power of CRAC eq. 43, "
+    "solve times), write metrics.json and PNG figures."
+)
+
 HELP = """examples:
   qpretarget evaluate run.npz -o report/
       metrics.json + tracking, pair distances, joint angles, violations, CoM, power figures
@@ -27,20 +37,9 @@ config or --pairs say (metrics.json "mesh_self_collision", self_collision_all_pa
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``evaluate`` subcommand."""
-    p = sub.add_parser(
-        "evaluate",
-        help="metrics (metrics.json) and figures of a saved run",
-        description=(
-            "Recompute the metrics of a run from its trajectory and robot model (tracking RMSE, "
-            "joint-limit and self-collision violations per frame, pair distances, CoM margin, "
-            "foot slip, velocity/acceleration/jerk peaks, average absolute power of CRAC eq. 43, "
-            "solve times), write metrics.json and PNG figures."
-        ),
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command(sub, "evaluate", help=SUMMARY, description=DESCRIPTION, examples=HELP)
     p.add_argument("run", help="run file (.npz) written by qpretarget")
-    p.add_argument("-o", "--output", required=True, help="output directory")
+    add_output(p, "output directory")
     p.add_argument("--before", help="the same motion run with the constraints off (.npz)")
     p.add_argument(
         "--pairs",
@@ -223,6 +222,7 @@ def _print_physics(m: dict) -> None:
             f"{a['torque_Nm']['p95']:.1f} N m"
         )
     print("\n".join(lines))
+
 
 def _print_summary(m: dict) -> None:
     """Print the headline numbers of ``metrics.json``."""

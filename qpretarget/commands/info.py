@@ -8,6 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
+from . import add_command
+
+SUMMARY = "robot, DoF, frames, limits, tasks and constraints of a config"
+DESCRIPTION = "Describe a controller config (YAML) or a bundled robot."
+
 HELP = """examples:
   qpretarget info configs/g1_augmentation.yaml          summary of a controller config
   qpretarget info configs/g1_augmentation.yaml --limits  joint position and velocity limits
@@ -20,13 +25,7 @@ HELP = """examples:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``info`` subcommand."""
-    p = sub.add_parser(
-        "info",
-        help="robot, DoF, frames, limits, tasks and constraints of a config",
-        description="Describe a controller config (YAML) or a bundled robot.",
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command(sub, "info", help=SUMMARY, description=DESCRIPTION, examples=HELP)
     p.add_argument("target", nargs="?", help="config YAML, or a bundled robot name")
     p.add_argument("--frames", action="store_true", help="list every frame")
     p.add_argument("--limits", action="store_true", help="list joint limits")

@@ -6,8 +6,13 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
+from . import add_command, add_motion
+
 if TYPE_CHECKING:
     from ..motion.keypoints import KeypointMap
+
+SUMMARY = "list a motion file's joints and the key-point map that fits them"
+DESCRIPTION = "Show the joints of a BVH, ASF/AMC or C3D file and the key-point map guess."
 
 HELP = """examples:
   qpretarget keypoints ../shared/data/mocap/cmu_16_15_walk.bvh
@@ -22,14 +27,8 @@ pass the filled file with `qpretarget retarget ... --keypoint-map my_skeleton.ya
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``keypoints`` subcommand."""
-    p = sub.add_parser(
-        "keypoints",
-        help="list a motion file's joints and the key-point map that fits them",
-        description="Show the joints of a BVH, ASF/AMC or C3D file and the key-point map guess.",
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("motion", help="motion file: .bvh, .amc (with its .asf), .c3d")
+    p = add_command(sub, "keypoints", help=SUMMARY, description=DESCRIPTION, examples=HELP)
+    add_motion(p)
     p.add_argument("--template", action="store_true", help="print only a YAML map template")
     p.set_defaults(func=run)
 

@@ -6,6 +6,17 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
+from typing import Any
+
+from . import add_command, add_config, add_control_rate, add_quiet
+
+SUMMARY = "retarget a live mocap stream (Xsens MVN over UDP, or a file in real time)"
+DESCRIPTION = (
+    "Receive a motion-capture stream, run the online retargeter at the control rate "
+    "(filling lost frames, extrapolating one late frame, then holding) and publish each "
+    "command to UDP and/or the browser viewer, with latency and deadline figures."
+)
 
 HELP = """examples:
   qpretarget live configs/g1_whole_body.yaml --source xsens                 MVN on port 9763
@@ -26,18 +37,19 @@ Command datagram layouts, the status line and the latency figures: docs/live.md.
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``live`` subcommand."""
-    p = sub.add_parser(
-        "live",
-        help="retarget a live mocap stream (Xsens MVN over UDP, or a file in real time)",
-        description=(
-            "Receive a motion-capture stream, run the online retargeter at the control rate "
-            "(filling lost frames, extrapolating one late frame, then holding) and publish each "
-            "command to UDP and/or the browser viewer, with latency and deadline figures."
-        ),
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("config", help="controller YAML with a `retarget:` section")
+    p = add_command(sub, "live", help=SUMMARY, description=DESCRIPTION, examples=HELP)
+    add_config(p)
+    _add_source_arguments(p)
+    add_control_rate(p)
+    _add_output_arguments(p)
+    _add_loop_arguments(p)
+    p.add_argument("--json", action="store_true", help="print the final report as JSON")
+    add_quiet(p, "no status line")
+    p.set_defaults(func=run)  # fmt: skip
+
+
+def _add_source_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the stream comes from and how to read it."""
     p.add_argument("--source", default="xsens", help="xsens[:PORT] or file:CLIP")
     p.add_argument("--host", default=None, help="address to listen on (default 127.0.0.1)")
     p.add_argument(
@@ -53,7 +65,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="MVN position units (default m: MVN 2018 and later)",
     )
     p.add_argument("--keypoint-map", default=None, help="key-point map of the source's joints")
-    p.add_argument("--rate", type=float, default=None, help="control rate [Hz] (default 1/dt)")
+
+
+def _add_output_arguments(p: argparse.ArgumentParser) -> None:
+    """Where each command goes (UDP, viewer) and the files written at the end."""
     p.add_argument(
         "--publish",
         action="append",
@@ -81,6 +96,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="RUN.npz",
         help="also write the retargeter's run file (docs/formats.md) for evaluate / view",
     )
+
+
+def _add_loop_arguments(p: argparse.ArgumentParser) -> None:
+    """Deadlines, lost and late frames, scheduling, when to stop and a file source's pace."""
     p.add_argument(
         "--budget",
         type=float,
@@ -116,9 +135,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--idle-exit", type=float, default=None, help="stop after this long without a datagram [s]"
     )
     p.add_argument("--speed", type=float, default=None, help="file source: playback speed")
-    p.add_argument("--json", action="store_true", help="print the final report as JSON")
-    p.add_argument("--quiet", action="store_true", help="no status line")
-    p.set_defaults(func=run)  # fmt: skip
 
 
 def format_report(report: dict) -> str:
@@ -145,16 +161,19 @@ def format_report(report: dict) -> str:
     )
 
 
+_POSITIVE = ("budget", "max_wait", "max_lag", "duration", "idle_exit", "capture_rate", "speed")
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the live loop until Ctrl-C (or --duration / --idle-exit); return the exit code."""
     from ..control.controller import Controller
     from ..errors import ConfigError
     from ..fileio import check_output_file
     from ..retarget import Retargeter
-    from ..sources import LiveSession, UdpPublisher, open_source
+    from ..sources import open_source
     from ..sources.session import set_realtime
 
-    for name in ("budget", "max_wait", "max_lag", "duration", "idle_exit", "capture_rate", "speed"):
+    for name in _POSITIVE:
         value = getattr(args, name)
         if value is not None and not value > 0:
             raise ConfigError(f"--{name.replace('_', '-')} must be positive, got {value}.")
@@ -170,6 +189,27 @@ def run(args: argparse.Namespace) -> int:
     source = open_source(args.source, options)
     controller = Controller.from_yaml(args.config)
     retargeter = Retargeter(controller, keypoint_map=args.keypoint_map, rate=args.rate)
+    publishers, viewer = _publishers(args, controller)
+    session = _session(args, retargeter, source, publishers, record is not None)
+    if args.realtime is not None:
+        set_realtime(args.realtime)
+    report = _run_session(args, session, source, publishers)
+    if record is not None:
+        _write_record(session, record)
+    if run_file is not None:
+        _write_run(session, retargeter, run_file)
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(format_report(report))
+    _ = viewer
+    return 0
+
+
+def _publishers(args: argparse.Namespace, controller: Any) -> tuple[list, Any]:
+    """The UDP publishers of ``--publish`` and the browser viewer of ``--view`` (or ``None``)."""
+    from ..sources import UdpPublisher
+
     publishers: list = [UdpPublisher(url, args.format) for url in args.publish]
     viewer = None
     if args.view:
@@ -178,7 +218,16 @@ def run(args: argparse.Namespace) -> int:
         viewer = LiveViewer(controller, port=args.view_port)
         print(f"viewer: {viewer.url}", file=sys.stderr)
         publishers.append(viewer)
-    session = LiveSession(
+    return publishers, viewer
+
+
+def _session(
+    args: argparse.Namespace, retargeter: Any, source: Any, publishers: list, record: bool
+) -> Any:
+    """The :class:`~qpretarget.sources.LiveSession` with the loop options (ms -> s)."""
+    from ..sources import LiveSession
+
+    return LiveSession(
         retargeter,
         source,
         publishers=publishers,
@@ -186,14 +235,16 @@ def run(args: argparse.Namespace) -> int:
         max_wait=None if args.max_wait is None else 1e-3 * args.max_wait,
         resume_time=args.resume_time,
         max_lag=1e-3 * args.max_lag,
-        record=record is not None,
+        record=record,
         keypoint_map=args.keypoint_map,
     )
-    if args.realtime is not None:
-        set_realtime(args.realtime)
+
+
+def _run_session(args: argparse.Namespace, session: Any, source: Any, publishers: list) -> dict:
+    """Run the loop with the status line on stderr; close the publishers however it ends."""
     tty = sys.stderr.isatty()
 
-    def status(s: LiveSession) -> None:
+    def status(s: Any) -> None:
         line = s.status_line()
         print(("\r" + line) if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
 
@@ -214,24 +265,25 @@ def run(args: argparse.Namespace) -> int:
                 close()
     if tty and not args.quiet:
         print(file=sys.stderr)
-    if record is not None:
-        if session.counts["ticks"]:
-            session.save(record)
-            print(f"wrote {record}", file=sys.stderr)
-        else:
-            print(f"nothing received: {record} not written", file=sys.stderr)
-    if run_file is not None:
-        if session.counts["ticks"]:
-            from ..fileio import atomic_path
+    return report
 
-            with atomic_path(run_file, suffix=".npz") as tmp:
-                retargeter.trajectory().save(tmp)
-            print(f"wrote {run_file}", file=sys.stderr)
-        else:
-            print(f"nothing received: {run_file} not written", file=sys.stderr)
-    if args.json:
-        print(json.dumps(report))
+
+def _write_record(session: Any, record: Path) -> None:
+    """Save the live record (``--record``) unless nothing was received."""
+    if session.counts["ticks"]:
+        session.save(record)
+        print(f"wrote {record}", file=sys.stderr)
     else:
-        print(format_report(report))
-    _ = viewer
-    return 0
+        print(f"nothing received: {record} not written", file=sys.stderr)
+
+
+def _write_run(session: Any, retargeter: Any, run_file: Path) -> None:
+    """Save the retargeter's run file (``--run``, atomic) unless nothing was received."""
+    if session.counts["ticks"]:
+        from ..fileio import atomic_path
+
+        with atomic_path(run_file, suffix=".npz") as tmp:
+            retargeter.trajectory().save(tmp)
+        print(f"wrote {run_file}", file=sys.stderr)
+    else:
+        print(f"nothing received: {run_file} not written", file=sys.stderr)

@@ -5,6 +5,15 @@ from __future__ import annotations
 
 import argparse
 
+from . import add_command, add_output
+
+SUMMARY = "render depth point clouds of a human model following a mocap clip (sample input)"
+DESCRIPTION = (
+    "Pose example-robot-data's human model by a mocap clip (any format qpretarget "
+    "reads), render it with a simulated depth camera (z-buffer, range noise, outliers) "
+    "and write the point-cloud sequence that retarget-cloud reads."
+)
+
 HELP = """examples:
   qpretarget make-cloud ../shared/data/mocap/cmu_14_37_drink_soda.bvh -o clouds.npz
       3 s of the clip at 30 Hz, rendered like a Kinect V2 2.8 m in front of the person
@@ -22,19 +31,9 @@ Layout of the file and how the rendering works: docs/point_clouds.md
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``make-cloud`` subcommand."""
-    p = sub.add_parser(
-        "make-cloud",
-        help="render depth point clouds of a human model following a mocap clip (sample input)",
-        description=(
-            "Pose example-robot-data's human model by a mocap clip (any format qpretarget "
-            "reads), render it with a simulated depth camera (z-buffer, range noise, outliers) "
-            "and write the point-cloud sequence that retarget-cloud reads."
-        ),
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command(sub, "make-cloud", help=SUMMARY, description=DESCRIPTION, examples=HELP)
     p.add_argument("clip", help="mocap clip (.bvh, .amc, .c3d, key-point .npz/.csv)")
-    p.add_argument("-o", "--output", required=True, help="cloud sequence to write (.npz)")
+    add_output(p, "cloud sequence to write (.npz)")
     p.add_argument("--rate", type=float, default=30.0, help="frames per second (default 30)")
     p.add_argument("--start", type=float, default=0.0, help="start in the clip [s] (default 0)")
     p.add_argument(

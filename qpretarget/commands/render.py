@@ -5,6 +5,11 @@ from __future__ import annotations
 
 import argparse
 
+from . import add_command, add_output
+
+SUMMARY = "render a run to an animated GIF/MP4 (robot beside the human, targets, CoM)"
+DESCRIPTION = "Offscreen rendering (matplotlib, no GPU, no display)."
+
 HELP = """examples:
   qpretarget render walk_g1.npz -o walk_g1.gif
   qpretarget render walk_g1.npz -o clip.gif --fps 15 --start 2 --end 6 --size 480x360
@@ -24,15 +29,9 @@ def _size(text: str) -> tuple[int, int]:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``render`` subcommand."""
-    p = sub.add_parser(
-        "render",
-        help="render a run to an animated GIF/MP4 (robot beside the human, targets, CoM)",
-        description="Offscreen rendering (matplotlib, no GPU, no display).",
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command(sub, "render", help=SUMMARY, description=DESCRIPTION, examples=HELP)
     p.add_argument("run", help="run .npz")
-    p.add_argument("-o", "--output", required=True, help="output .gif or .mp4")
+    add_output(p, "output .gif or .mp4")
     p.add_argument("--fps", type=float, default=20.0, help="frames per second (default 20)")
     p.add_argument("--size", type=_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")
     p.add_argument("--start", type=float, default=None, help="start time [s]")

@@ -8,6 +8,22 @@ import sys
 import time
 from pathlib import Path
 
+from . import (
+    add_clip_range,
+    add_command,
+    add_config,
+    add_control_rate,
+    add_motion,
+    add_output,
+    add_quiet,
+)
+
+SUMMARY = "retarget a mocap file (BVH, ASF/AMC, C3D) to a robot trajectory (.npz)"
+DESCRIPTION = (
+    "Filter, up-sample, scale and track a human motion with a controller config; write "
+    "the robot trajectory at the control rate and print the tracking summary."
+)
+
 HELP = """examples:
   qpretarget retarget configs/g1_whole_body.yaml walk.bvh -o walk_g1.npz
   qpretarget retarget configs/g1_whole_body.yaml ../shared/data/mocap/cmu_16_33_walk_stop.bvh \\
@@ -23,22 +39,12 @@ the run file of docs/formats.md (qpretarget evaluate / view read it).
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``retarget`` subcommand."""
-    p = sub.add_parser(
-        "retarget",
-        help="retarget a mocap file (BVH, ASF/AMC, C3D) to a robot trajectory (.npz)",
-        description=(
-            "Filter, up-sample, scale and track a human motion with a controller config; write "
-            "the robot trajectory at the control rate and print the tracking summary."
-        ),
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("config", help="controller YAML with a `retarget:` section")
-    p.add_argument("motion", help="motion file: .bvh, .amc (with its .asf), .c3d")
-    p.add_argument("-o", "--output", required=True, help="run file to write (.npz)")
-    p.add_argument("--start", type=float, default=None, help="first time of the clip [s]")
-    p.add_argument("--end", type=float, default=None, help="end time of the clip [s] (excluded)")
-    p.add_argument("--rate", type=float, default=None, help="control rate [Hz] (default 1/dt)")
+    p = add_command(sub, "retarget", help=SUMMARY, description=DESCRIPTION, examples=HELP)
+    add_config(p)
+    add_motion(p)
+    add_output(p, "run file to write (.npz)")
+    add_clip_range(p)
+    add_control_rate(p)
     p.add_argument(
         "--causal", action="store_true", help="causal filtering (as online) instead of zero phase"
     )
@@ -48,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--length-scale", type=float, default=None, help="metres per file unit (default: auto)"
     )
     p.add_argument("--up-axis", choices=("y", "z"), default=None, help="up axis of the file")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 

@@ -6,6 +6,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from . import add_command, add_output
+
+SUMMARY = "retarget from depth point clouds (Wang 2017 HUMROB, EM with a QP M-step)"
+DESCRIPTION = (
+    "Fit a template made of the robot's link meshes (scaled to the person from the first "
+    "frame) to each point cloud by EM; the M-step is a QP with joint limits and the "
+    "robot's balance as constraints. Writes the run format of the other retargeting "
+    "commands."
+)
+
 HELP = """examples:
   qpretarget retarget-cloud configs/cloud_g1.yaml clouds.npz -o run.npz
       fit every frame of a point-cloud sequence, write the run (evaluate/view read it)
@@ -22,21 +32,10 @@ input layouts and the config keys: docs/point_clouds.md
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``retarget-cloud`` subcommand."""
-    p = sub.add_parser(
-        "retarget-cloud",
-        help="retarget from depth point clouds (Wang 2017 HUMROB, EM with a QP M-step)",
-        description=(
-            "Fit a template made of the robot's link meshes (scaled to the person from the first "
-            "frame) to each point cloud by EM; the M-step is a QP with joint limits and the "
-            "robot's balance as constraints. Writes the run format of the other retargeting "
-            "commands."
-        ),
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command(sub, "retarget-cloud", help=SUMMARY, description=DESCRIPTION, examples=HELP)
     p.add_argument("config", help="cloud retargeting config (YAML), e.g. configs/cloud_g1.yaml")
     p.add_argument("input", help=".npz / .npy / .ply file, or a directory of frames")
-    p.add_argument("-o", "--output", required=True, help="run file to write (.npz)")
+    add_output(p, "run file to write (.npz)")
     p.add_argument("--rate", type=float, help="frame rate [Hz] when the input has no times")
     p.add_argument("--frames", help="frame range START:STOP[:STEP] (Python slice)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -16,6 +16,14 @@ from typing import Any
 
 import numpy as np
 
+from . import add_clip_range, add_command, add_motion, add_quiet
+
+SUMMARY = "send a mocap file as Xsens MVN network-stream datagrams (MXTP02) in real time"
+DESCRIPTION = (
+    "Play a BVH, ASF/AMC or C3D clip as the 23 segment poses of an Xsens MVN suit over "
+    "UDP, at the given rate and real-time pace."
+)
+
 HELP = """examples:
   qpretarget stream ../shared/data/mocap/cmu_131_04_dance_spin.bvh --to udp://127.0.0.1:9763
   qpretarget stream clip.bvh --to udp://127.0.0.1:9763 --protocol mxtp02 --rate 120 --loop
@@ -37,22 +45,12 @@ def _ints(text: str) -> set[int]:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``stream`` subcommand."""
-    p = sub.add_parser(
-        "stream",
-        help="send a mocap file as Xsens MVN network-stream datagrams (MXTP02) in real time",
-        description=(
-            "Play a BVH, ASF/AMC or C3D clip as the 23 segment poses of an Xsens MVN suit over "
-            "UDP, at the given rate and real-time pace."
-        ),
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("motion", help="motion file: .bvh, .amc (with its .asf), .c3d")
+    p = add_command(sub, "stream", help=SUMMARY, description=DESCRIPTION, examples=HELP)
+    add_motion(p)
     p.add_argument("--to", default="udp://127.0.0.1:9763", help="udp://HOST:PORT to send to")
     p.add_argument("--protocol", default="mxtp02", choices=("mxtp02",), help="datagram format")
     p.add_argument("--rate", type=float, default=None, help="sample rate [Hz] (default: clip's)")
-    p.add_argument("--start", type=float, default=None, help="first time of the clip [s]")
-    p.add_argument("--end", type=float, default=None, help="end time of the clip [s] (excluded)")
+    add_clip_range(p)
     p.add_argument("--speed", type=float, default=1.0, help="pace (1 = real time)")
     p.add_argument("--loop", action="store_true", help="play the clip again and again")
     p.add_argument("--units", choices=("m", "cm"), default="m", help="position units sent")
@@ -64,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--malformed", default="", help="after these samples send a broken datagram")
     p.add_argument("--pause-at", type=float, default=None, help="stop sending at this time [s]")
     p.add_argument("--pause", type=float, default=0.0, help="for this long [s] (samples lost)")
-    p.add_argument("--quiet", action="store_true", help="no summary line")
+    add_quiet(p, "no summary line")
     p.set_defaults(func=run)
 
 
@@ -94,7 +92,6 @@ def resample_poses(
 def run(args: argparse.Namespace) -> int:
     """Send the clip; return the exit code."""
     from ..errors import ConfigError
-    from ..motion import MotionError, load_motion
     from ..sources import mvn
     from ..sources.publish import parse_udp_url
 
@@ -103,6 +100,28 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--rate must be above 1 Hz, got {args.rate}.")
     if not args.speed > 0:
         raise ConfigError(f"--speed must be positive, got {args.speed}.")
+    t, P, Q, rate = _clip_poses(args)
+    datagrams = [
+        mvn.encode_pose(k, int(round(1000.0 * t[k])), P[k], Q[k], units=args.units)
+        for k in range(len(t))
+    ]
+    sender = _Sender(args, address, t, P, Q, rate)
+    wall = sender.play(datagrams)
+    if not args.quiet:
+        print(
+            f"sent {sender.sent} datagrams ({len(datagrams)} samples x {sender.loop or 1}) to "
+            f"udp://{address[0]}:{address[1]} at {rate:g} Hz in {wall:.2f} s"
+            + (f", paused {args.pause:g} s" if sender.paused else ""),
+            file=sys.stderr,
+        )
+    return 0
+
+
+def _clip_poses(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """``(t, P, Q, rate)``: the clip's MVN segment poses at the sending rate, ``t`` from 0."""
+    from ..motion import MotionError, load_motion
+    from ..sources import mvn
+
     try:
         motion = load_motion(args.motion)
     except (FileNotFoundError, ValueError) as exc:
@@ -114,70 +133,93 @@ def run(args: argparse.Namespace) -> int:
     P, Q = mvn.segment_poses(motion, args.keypoint_map)
     rate = float(args.rate or motion.rate)
     t, P, Q = resample_poses(motion.t - motion.t[0], P, Q, rate)
-    datagrams = [
-        mvn.encode_pose(k, int(round(1000.0 * t[k])), P[k], Q[k], units=args.units)
-        for k in range(len(t))
-    ]
-    faults: dict[str, Any] = {
-        name: _ints(getattr(args, name)) for name in ("drop", "duplicate", "swap", "malformed")
-    }
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sent = 0
-    if args.delay > 0:
-        time.sleep(args.delay)
-    t0 = time.perf_counter()
-    loop = 0
-    period = len(datagrams)
-    paused = False
-    try:
-        while True:
-            held_back: bytes | None = None
-            for k, data in enumerate(datagrams):
-                seq = k + loop * period
-                if loop:
-                    data = mvn.encode_pose(
-                        seq, int(round(1000.0 * (t[k] + loop * period / rate))), P[k], Q[k],
-                        units=args.units,
-                    )  # fmt: skip
-                due = t0 + seq / (rate * args.speed)
-                delay = due - time.perf_counter()
-                if delay > 0:
-                    time.sleep(delay)
-                tk = seq / rate
-                if args.pause_at is not None and args.pause_at <= tk < args.pause_at + args.pause:
-                    paused = True
-                    continue
-                if seq in faults["drop"]:
-                    continue
-                if seq in faults["swap"] and held_back is None:
-                    held_back = data
-                    continue
-                sock.sendto(data, address)
-                sent += 1
-                if held_back is not None:
-                    sock.sendto(held_back, address)
-                    sent += 1
-                    held_back = None
-                if seq in faults["duplicate"]:
-                    sock.sendto(data, address)
-                    sent += 1
-                if seq in faults["malformed"]:
-                    sock.sendto(data[: len(data) // 2], address)  # truncated
-                    sock.sendto(b"MXTP02" + bytes(40), address)  # size field disagrees
-                    sent += 2
-            loop += 1
-            if not args.loop:
-                break
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sock.close()
-    wall = time.perf_counter() - t0
-    if not args.quiet:
-        print(
-            f"sent {sent} datagrams ({len(datagrams)} samples x {loop or 1}) to "
-            f"udp://{address[0]}:{address[1]} at {rate:g} Hz in {wall:.2f} s"
-            + (f", paused {args.pause:g} s" if paused else ""),
-            file=sys.stderr,
-        )
-    return 0
+    return t, P, Q, rate
+
+
+class _Sender:
+    """Sends the datagrams at real-time pace (``--speed``), with the fault options applied.
+
+    ``sent`` counts the datagrams sent, ``loop`` the passes over the clip completed, ``paused``
+    says whether ``--pause-at`` held samples back.
+    """
+
+    def __init__(
+        self,
+        args: argparse.Namespace,
+        address: tuple[str, int],
+        t: np.ndarray,
+        P: np.ndarray,
+        Q: np.ndarray,
+        rate: float,
+    ) -> None:
+        self.args, self.address, self.t, self.P, self.Q, self.rate = args, address, t, P, Q, rate
+        self.faults: dict[str, Any] = {
+            name: _ints(getattr(args, name)) for name in ("drop", "duplicate", "swap", "malformed")
+        }
+        self.sent = 0
+        self.loop = 0
+        self.paused = False
+
+    def play(self, datagrams: list[bytes]) -> float:
+        """Send every pass (one, or until Ctrl-C with ``--loop``); the wall time [s]."""
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        if self.args.delay > 0:
+            time.sleep(self.args.delay)
+        t0 = time.perf_counter()
+        try:
+            while True:
+                self._one_pass(datagrams, t0)
+                self.loop += 1
+                if not self.args.loop:
+                    break
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.sock.close()
+        return time.perf_counter() - t0
+
+    def _one_pass(self, datagrams: list[bytes], t0: float) -> None:
+        """Send the clip once, each sample at its time; pass ``loop`` renumbers the samples."""
+        from ..sources.mvn import encode_pose
+
+        args, faults, period, rate = self.args, self.faults, len(datagrams), self.rate
+        held_back: bytes | None = None
+        for k, data in enumerate(datagrams):
+            seq = k + self.loop * period
+            if self.loop:
+                data = encode_pose(
+                    seq, int(round(1000.0 * (self.t[k] + self.loop * period / rate))),
+                    self.P[k], self.Q[k], units=args.units,
+                )  # fmt: skip
+            due = t0 + seq / (rate * args.speed)
+            delay = due - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            if self._withheld(seq):
+                continue
+            if seq in faults["swap"] and held_back is None:
+                held_back = data
+                continue
+            self._send(data)
+            if held_back is not None:
+                self._send(held_back)
+                held_back = None
+            if seq in faults["duplicate"]:
+                self._send(data)
+            if seq in faults["malformed"]:
+                self._send(data[: len(data) // 2])  # truncated
+                self._send(b"MXTP02" + bytes(40))  # size field disagrees
+
+    def _withheld(self, seq: int) -> bool:
+        """Sample ``seq`` falls in the ``--pause`` or is dropped (``--drop``)."""
+        args = self.args
+        tk = seq / self.rate
+        if args.pause_at is not None and args.pause_at <= tk < args.pause_at + args.pause:
+            self.paused = True
+            return True
+        return seq in self.faults["drop"]
+
+    def _send(self, data: bytes) -> None:
+        """Send one datagram."""
+        self.sock.sendto(data, self.address)
+        self.sent += 1

@@ -7,6 +7,11 @@ import argparse
 import webbrowser
 from pathlib import Path
 
+from . import add_command
+
+SUMMARY = "interactive 3D viewer in the browser for a run (.npz) or a config (.yaml)"
+DESCRIPTION = "Serve a 3D view of a run or of a controller config on localhost."
+
 HELP = """examples:
   qpretarget view walk_g1.npz                       replay a run beside the human motion
   qpretarget view configs/g1_whole_body.yaml        check a robot setup: frames, collision pairs
@@ -19,13 +24,7 @@ The page is served on http://HOST:PORT; press Ctrl-C to stop. Needs the `viz` ex
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``view`` subcommand."""
-    p = sub.add_parser(
-        "view",
-        help="interactive 3D viewer in the browser for a run (.npz) or a config (.yaml)",
-        description="Serve a 3D view of a run or of a controller config on localhost.",
-        epilog=HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command(sub, "view", help=SUMMARY, description=DESCRIPTION, examples=HELP)
     p.add_argument("input", help="a run .npz or a controller .yaml")
     p.add_argument("--host", default="127.0.0.1", help="interface (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0: any free)")
