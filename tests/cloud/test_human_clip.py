@@ -29,9 +29,9 @@ from qpretarget.motion.keypoints import keypoint_orientations, keypoint_position
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "cloud_g1.yaml"
 CLIP = "cmu_14_37_drink_soda.bvh"
 STEP, FRAMES = 12, 12
-#: The issue's acceptance: angle between the robot's and the human's upper arm and forearm
-#: [deg], on every frame.
-ACCEPTANCE_DEG = 15.0
+#: The acceptance (issue 23; issue 9 had 15): angle between the robot's and the human's upper
+#: arm and forearm [deg] (qpretarget.cloud.measures.arm_direction_errors), on every frame.
+ACCEPTANCE_DEG = 12.0
 
 
 @pytest.fixture(scope="module")
@@ -88,14 +88,15 @@ def direction_errors(g1, human_run) -> np.ndarray:
 
 
 def test_wrist_and_elbow_directions_follow_the_human(g1, human_run):
-    """The issue's acceptance: upper arms and forearms within 15 deg of the human's, every frame.
+    """The issue's acceptance: upper arms and forearms within 12 deg of the human's, every frame.
 
-    Measured on this sequence: worst 12.5 deg (drinking arm's upper arm while the cup is up),
-    8.7 / 4.8 / 6.5 deg for the other three segments. The margin (2.5 deg) covers round-off
-    across BLAS builds; the failures this guards against are above it: 15.3-15.5 deg with a
-    frame's full information on the joint centres (``calibration.centre_information: 1``, the
-    first frames lock the elbow's estimate in), 27 deg without the joint-centre estimate,
-    32 deg with the human poser's former clavicle drift.
+    Measured on this sequence: worst 11.2 deg (drinking arm's upper arm while the cup is up),
+    8.4 / 4.7 / 6.4 deg for the other three segments (12.5 deg before the E-step pairs were
+    shared by the stages of a frame). The margin (0.8 deg) is smaller than round-off across
+    BLAS builds might need; the failures this guards against are above it: 12.5 deg with
+    each stage's own neighbour search, 15.3-15.5 deg with a frame's full information on the
+    joint centres (``calibration.centre_information: 1``), 27 deg without the joint-centre
+    estimate, 32 deg with the human poser's former clavicle drift.
     """
     err = direction_errors(g1, human_run)
     assert err.max() <= ACCEPTANCE_DEG, (
@@ -169,3 +170,24 @@ def test_feet_flat_and_pointing_like_the_human(g1, human_run):
             err = np.degrees(np.arctan2(R[1, 0], R[0, 0]) - np.arctan2(d[1], d[0]))
             err = abs((err + 180.0) % 360.0 - 180.0)
             assert err <= 20.0, f"frame {k}: {f} heads {err:.1f} deg away from the human's foot"
+
+
+def test_second_clip_teapot_gestures(g1, mocap):
+    """A second clip (CMU 29_03 teapot gestures, both arms moving), same setup and bound.
+
+    Measured: worst 11.7 deg (left forearm; 9.9 / 11.5 / 10.2 deg the others), every frame ok,
+    joint limits exact. Margin 0.3 deg: the figure is the issue's 12 deg, met here with little
+    to spare (3 s at 30 Hz: 14.0 deg, docs/point_clouds.md).
+    """
+    motion = load_motion(mocap / "cmu_29_03_teapot_arm_gestures.bvh")
+    idx = np.arange(0, STEP * FRAMES, STEP)
+    kp = {k: v[idx] for k, v in keypoint_positions(motion).items()}
+    ori = {k: v[idx] for k, v in keypoint_orientations(motion).items()}
+    syn, poser = human_clip_sequence(kp, ori, motion.t[idx], calibration_frames=4)
+    traj, results = CloudRetargeter(CloudConfig.from_yaml(CONFIG), robot=g1).run(syn.sequence)
+    err = arm_direction_errors(g1, traj.q, poser, syn.q)
+    assert err.max() <= ACCEPTANCE_DEG, np.round(err.max(axis=0), 1)
+    assert all(r.status == "ok" for r in results)
+    qi = g1.joint_q_index
+    assert np.all(traj.q[:, qi] >= g1.q_min[qi] - 1e-9)
+    assert np.all(traj.q[:, qi] <= g1.q_max[qi] + 1e-9)
