@@ -140,7 +140,7 @@ class Contacts(Constraint):
         self.gain = None if gain is None else positive_float(gain, "gain [1/s]")
         self.names: list[str] = []
         self.frame_ids: list[int] = []
-        self.rectangles: list[tuple[float, float, float, float] | None] = []
+        self.rectangles: list[tuple[float, ...] | None] = []  # (x_min, x_max, y_min, y_max)
         self._active = np.zeros(0, dtype=bool)
         self._anchor_p = np.zeros((0, 3))
         self._anchor_R = np.zeros((0, 3, 3))
@@ -151,7 +151,7 @@ class Contacts(Constraint):
     def bind(self, robot: RobotModel, *, path: str = "") -> None:
         super().bind(robot, path=path)
         p = f"{path}." if path else ""
-        entries: list[tuple[str, str, tuple[float, float, float, float] | None]] = []
+        entries: list[tuple[str, str, tuple[float, ...] | None]] = []  # (x0, x1, y0, y1)
         if self._feet_spec is not None or self._frames_spec is None:
             feet = self._feet_spec if self._feet_spec is not None else list(robot.feet)
             for i, foot in enumerate(feet):

@@ -76,9 +76,9 @@ class ProxSuiteSolver(QPSolver):
         res = self._qp.results
         info = res.info
         ok = info.status == _SOLVED
-        x: np.ndarray | None = res.x.copy()
+        x = np.array(res.x, dtype=float)
         if not np.isfinite(x).all():
-            x, ok = None, False
+            return None, False, info
         return x, ok, info
 
     def solve(self, problem: QPProblem) -> QPSolution:

@@ -63,6 +63,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..problem import QPProblem
 from ..robot import RobotModel
+from ..solvers.base import QPSolver
 from ..validation import positive_float
 from .base import STRATEGIES, Strategy, StrategyResult, TickProblem
 
@@ -152,7 +153,13 @@ class Hierarchy(Strategy):
         self.rank_tolerance = positive_float(rank_tolerance, "rank_tolerance")
         self._levels: list[_Level] = []
 
-    def bind(self, robot: RobotModel, task_dims, n_rows, solver_factory) -> None:  # noqa: ANN001
+    def bind(
+        self,
+        robot: RobotModel,
+        task_dims: list[tuple[str, int, int]],
+        n_rows: int,
+        solver_factory: Any,
+    ) -> None:
         super().bind(robot, task_dims, n_rows, solver_factory)
         nv = robot.nv
         levels = sorted({lvl for _, _, lvl in task_dims})
@@ -172,7 +179,7 @@ class Hierarchy(Strategy):
         for lv in self._levels:
             lv.solver.reset()
 
-    def solvers(self):  # noqa: ANN201
+    def solvers(self) -> list[QPSolver]:
         return [lv.solver for lv in self._levels]
 
     def assemble(self, tp: TickProblem, k: int, x_above: np.ndarray | None) -> QPProblem:
@@ -212,6 +219,7 @@ class Hierarchy(Strategy):
             p.lb[...] = tp.lb
             p.ub[...] = tp.ub
             return p
+        assert x_above is not None, "a level below the first needs the solution above it"
         # v = x + Z z: cost 1/2 z'Z'Hv Z z + z'Z'(Hv x + g_v), with g_v = -Jw' rw.
         N = self._N_above
         f = N.shape[1]
@@ -267,7 +275,7 @@ class Hierarchy(Strategy):
         return x + t * d, t
 
     def solve(self, tp: TickProblem) -> StrategyResult:
-        x = None
+        x: np.ndarray | None = None
         iterations = 0
         solve_time = 0.0
         details: list[dict[str, Any]] = []
@@ -287,8 +295,8 @@ class Hierarchy(Strategy):
             iterations += max(sol.iterations, 0)
             solve_time += sol.solve_time
             v = None
-            if ok:
-                v = sol.x.copy() if lv.first else x + lv.Z @ sol.x
+            if ok and sol.x is not None:
+                v = sol.x.copy() if x is None else x + lv.Z @ sol.x
             details.append(
                 {
                     "level": lv.level,
@@ -298,10 +306,12 @@ class Hierarchy(Strategy):
                     "iterations": sol.iterations,
                     "solve_time": sol.solve_time,
                     "x": v,
-                    "residual": float(np.linalg.norm(lv.Jw @ v - lv.rw)) if ok else float("nan"),
+                    "residual": (
+                        float(np.linalg.norm(lv.Jw @ v - lv.rw)) if v is not None else float("nan")
+                    ),
                 }
             )
-            if not ok:
+            if v is None:
                 if x is None:
                     msg = f"level {lv.level}: {sol.status}"
                     return StrategyResult(None, False, msg, iterations, solve_time, details)

@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -265,7 +266,13 @@ class NullSpace(Strategy):
         self.ignore_rows = bool(ignore_rows)
         self.rank_tolerance = positive_float(rank_tolerance, "rank_tolerance")
 
-    def bind(self, robot: RobotModel, task_dims, n_rows, solver_factory) -> None:  # noqa: ANN001
+    def bind(
+        self,
+        robot: RobotModel,
+        task_dims: list[tuple[str, int, int]],
+        n_rows: int,
+        solver_factory: Any,
+    ) -> None:
         super().bind(robot, task_dims, n_rows, solver_factory)
         if n_rows and not self.ignore_rows:
             raise row_constraints_error(self.type_name, n_rows)
@@ -329,7 +336,7 @@ class NullSpace(Strategy):
         t0 = time.perf_counter()
         Js, vs, z = self.gather(tp)
         dampings = self.dampings if self.dampings is not None else [tp.damping] * len(Js)
-        W = tp.W
+        W: np.ndarray | None = tp.W
         if W is not None and np.array_equal(W, np.eye(self.nv)):
             W = None
         try:

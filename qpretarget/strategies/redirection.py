@@ -153,23 +153,28 @@ class Redirection(Strategy):
         self.last_blend = 0.0
         self._bound = False  # set by bind (the collision model exists from then on)
 
-    def bind(self, robot: RobotModel, task_dims, n_rows, solver_factory) -> None:  # noqa: ANN001
+    def bind(
+        self,
+        robot: RobotModel,
+        task_dims: list[tuple[str, int, int]],
+        n_rows: int,
+        solver_factory: Any,
+    ) -> None:
         super().bind(robot, task_dims, n_rows, solver_factory)
         if n_rows and not self.ignore_rows:
             raise row_constraints_error(self.type_name, n_rows)
         shapes = link_shapes(robot, self.geometry)
-        pairs = []
+        pairs: list[tuple[str, str]] = []
         for k, pair in enumerate(self.pair_spec):
             if isinstance(pair, str) or len(pair) != 2:
                 raise ConfigError(
                     f"a pair is [link_a, link_b], got {pair!r}.", path=f"strategy.pairs[{k}]"
                 )
-            pairs.append(
-                tuple(
-                    resolve_link(robot, shapes, str(x), f"strategy.pairs[{k}][{i}]")
-                    for i, x in enumerate(pair)
-                )
+            a, b = (
+                resolve_link(robot, shapes, str(x), f"strategy.pairs[{k}][{i}]")
+                for i, x in enumerate(pair)
             )
+            pairs.append((a, b))
         #: The shared collision model (docs/collisions.md), only the pairs of ``pairs``.
         self.collision = CollisionModel(robot, pairs, geometry=self.geometry, path="strategy.pairs")
         cm = self.collision
@@ -232,8 +237,8 @@ class Redirection(Strategy):
             self.last_distances = self.collision.distances.copy()
             bj = blending(d, self.critical_distance, self.blend_alpha, self.blend_delta)
             active = np.flatnonzero(bj > self.activation)
-            b = float(bj[active].max()) if active.size else 0.0
-            self.last_blend = b
+            beta = float(bj[active].max()) if active.size else 0.0  # blending b of eq. 20
+            self.last_blend = beta
             r_blend = r
             if active.size:
                 # Points a, b of each active pair; eq. 17's unit normals n_a = n, n_b = -n.
@@ -248,12 +253,12 @@ class Redirection(Strategy):
                 S = ~np.any(np.abs(Jc) > 1e-12, axis=0)  # joints not moving any collision point
                 qr = weighted_prioritized_dls([Jc], [pc], [self.point_damping], W)  # eq. 19
                 qr[S] += q0[S]  # eq. 19, second term S J^* (p_r + K e)
-                r_blend = (1.0 - b) * r + b * (J @ qr)  # eq. 20, 22
+                r_blend = (1.0 - beta) * r + beta * (J @ qr)  # eq. 20, 22
             Jf, rf = J, r_blend
             if active.size and self.point_weight > 0:
                 # The collision points join the tasks (Dariush 2009 4.6.2, "task augmentation to
                 # control both critical points"), with their redirected velocities, blended by b.
-                sc = b * np.sqrt(self.point_weight)
+                sc = beta * np.sqrt(self.point_weight)
                 Jf = np.vstack([J, sc * Jc])
                 rf = np.concatenate([r_blend, sc * pc])
             if self.clamping:
@@ -267,7 +272,8 @@ class Redirection(Strategy):
             )
         ok = bool(np.all(np.isfinite(x)))
         status = (
-            f"redirection: {active.size} pair(s) active, b = {b:.3g}, {n_clamped} joint(s) clamped"
+            f"redirection: {active.size} pair(s) active, b = {beta:.3g}, "
+            f"{n_clamped} joint(s) clamped"
             if ok
             else "redirection: non-finite"
         )
