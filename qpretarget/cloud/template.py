@@ -457,16 +457,18 @@ class Template:
         e = self.centre_offsets
         self.scales = s
         R0, par = self._R0, self._parents
+        # All translations computed at once; the loops only hand them to pinocchio.
+        tj = self._t0 * s[self._seg_t][:, None] + np.einsum("jba,jb->ja", R0[par], e - e[par])
+        placements = self.model.jointPlacements
         for j in range(1, self.model.njoints):
-            self.model.jointPlacements[j].translation = self._t0[j] * s[self._seg_t[j]] + R0[
-                par[j]
-            ].T @ (e[j] - e[par[j]])
+            placements[j].translation = tj[j]
         ej_loc = np.einsum("jba,jb->ja", R0, e)  # R0_j^T e_j
-        for f in range(len(self.model.frames)):
-            t = self._frame_t0[f] * s[self._frame_seg[f]]
-            if not self._frame_at_joint[f]:
-                t = t - ej_loc[self._frame_joint[f]]
-            self.model.frames[f].placement.translation = t
+        fj = np.asarray(self._frame_joint)
+        tf = np.asarray(self._frame_t0) * s[np.asarray(self._frame_seg)][:, None]
+        tf -= np.where(np.asarray(self._frame_at_joint)[:, None], 0.0, ej_loc[fj])
+        frames = self.model.frames
+        for f in range(len(frames)):
+            frames[f].placement.translation = tf[f]
         # self.data stays: placements are read by every kinematics pass, the structure is fixed.
         self.local = self.points0 * s[self.point_segment][:, None] - ej_loc[self.joint]
         self._setup_blend()
@@ -798,10 +800,9 @@ class Template:
         LBS points count with their own joint only (an approximation; the step is checked).
         """
         D = self.centre_jacobian_blocks(posed)
-        g, nJ = self._group, len(self.used_joints)
-        w0 = np.bincount(g, P1, nJ)
-        c = np.stack([np.bincount(g, P1 * posed.offsets[:, a], nJ) for a in range(3)], 1)
-        f = np.stack([np.bincount(g, E[:, a], nJ) for a in range(3)], 1)
+        W = _moment_columns(P1, posed.offsets, E)
+        sums = self._group_sums(W[:, [0, 1, 2, 3, 13, 14, 15]])
+        w0, c, f = sums[:, 0], sums[:, 1:4], sums[:, 4:7]
         A = w0[:, None, None] * J6[:, :3] - np.matmul(skew_batch(c), J6[:, 3:])  # (J, 3, nv)
         H_qe = np.einsum("jan,jac->nc", A, D)
         H_ee = np.einsum("j,jac,jad->cd", w0, D, D)
