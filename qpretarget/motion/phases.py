@@ -65,6 +65,10 @@ def _positive(value: Any, name: str) -> float:
 
 
 # --------------------------------------------------------------------------------- detection
+#: A foot held slow under ``height_off`` this long while the other is up is stood on [s].
+TIPTOE_TIME = 0.2
+
+
 @dataclass(frozen=True)
 class PhaseThresholds:
     """Thresholds of :class:`SupportPhaseDetector`.
@@ -132,6 +136,7 @@ class SupportPhaseDetector:
         self._support = {"left": True, "right": True}
         self.flight = False
         self._pending: dict[str, float | None] = {"left": None, "right": None}
+        self._low_since: dict[str, float | None] = {"left": None, "right": None}
         self.height = {"left": 0.0, "right": 0.0}
         self.speed = {"left": 0.0, "right": 0.0}
 
@@ -189,6 +194,19 @@ class SupportPhaseDetector:
                 raw = not (h > th.height_off or v > th.speed_off)
             else:
                 raw = h < th.height_on and v < th.speed_on
+                other = "right" if side == "left" else "left"
+                low = h < th.height_off and v < th.speed_on and h <= self.height[other]
+                if not low:
+                    self._low_since[side] = None
+                elif self._low_since[side] is None:
+                    self._low_since[side] = t
+                if not raw and not self._support[other] and low:
+                    # Nobody hovers: with the other foot up, the lower foot held slow under
+                    # height_off for TIPTOE_TIME is stood on (a dancer on the ball of the foot,
+                    # its points 3-6 cm over the clip's lowest: it never came under height_on,
+                    # and the spin clip read 4.6 s of flight). The hold keeps a jump's apex and
+                    # landing approach in flight.
+                    raw = t - float(self._low_since[side] or t) >= TIPTOE_TIME - 1e-12
             if raw == self._support[side]:
                 self._pending[side] = None
             elif self._pending[side] is None:

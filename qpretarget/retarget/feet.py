@@ -64,6 +64,10 @@ class FootTargets:
         self.width_r = 0.0
         self.width_h = 0.0
         self._last_yaw: dict[str, float] = {}
+        #: side -> the person's ankle-toe length [m]: the calibration's (the robot has a toe
+        #: key-point) or the first sample's (it has none, as G1: the foot yaw and the pivots
+        #: were never measured then).
+        self.toe_length: dict[str, float] = {}
 
     def start(self, kp: Mapping[str, np.ndarray], soles: Mapping[str, pin.SE3]) -> None:
         """Anchor the person's feet where they are and measure both stance widths."""
@@ -72,6 +76,13 @@ class FootTargets:
             for side in SIDES
             if f"{side}_ankle" in kp and np.all(np.isfinite(kp[f"{side}_ankle"]))
         }
+        for side in SIDES:
+            length = self.calibration.human_lengths.get(f"{side}_toe")
+            toe, ankle = kp.get(f"{side}_toe"), kp.get(f"{side}_ankle")
+            if not length and toe is not None and ankle is not None:
+                length = float(np.linalg.norm(np.asarray(toe) - np.asarray(ankle)))
+            if length and math.isfinite(length) and length > 0:
+                self.toe_length[side] = float(length)
         psi = yaw_of(soles["left"].rotation[:, 0])
         lateral = np.array([-math.sin(psi), math.cos(psi), 0.0])
         self.width_r = float(lateral @ (soles["left"].translation - soles["right"].translation))
@@ -94,7 +105,7 @@ class FootTargets:
         Flat means over 90 % (a pivot is only detected on a flat foot).
         """
         toe, ankle = kp.get(f"{side}_toe"), kp.get(f"{side}_ankle")
-        length = self.calibration.human_lengths.get(f"{side}_toe")
+        length = self.toe_length.get(side)
         if toe is None or ankle is None or not length:
             return None, False
         d = toe - ankle

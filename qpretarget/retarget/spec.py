@@ -437,7 +437,10 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
     step = _mapping(raw.get("stepping"), f"{path}.stepping", "stepping settings")
     _check_keys(step, [f.name for f in fields(StepSettings)], f"{path}.stepping")
     try:
-        stepping = StepSettings(**{k: _number(v, f"{path}.stepping.{k}") for k, v in step.items()})
+        step_args: dict[str, Any] = {
+            k: v if k == "pivot" else _number(v, f"{path}.stepping.{k}") for k, v in step.items()
+        }
+        stepping = StepSettings(**step_args)
     except ValueError as exc:
         raise ConfigError(str(exc), path=f"{path}.stepping") from None
     return SupportSpec(

@@ -66,6 +66,8 @@ class StepSettings:
         pivot_yaw: Turn of the person's stance foot that starts a pivot [rad] (15 deg).
         pivot_radius: Largest motion of the person's foot (scaled) during a pivot [m].
         pivot_rate: Largest yaw rate of a pivoting anchor [rad/s].
+        pivot: Whether stance feet pivot at all (the shipped G1 and Talos configs: off, see
+            docs/retargeting.md section 4b).
     """
 
     clearance: float = 0.02
@@ -78,15 +80,19 @@ class StepSettings:
     pivot_yaw: float = math.radians(15.0)
     pivot_radius: float = 0.03
     pivot_rate: float = math.radians(360.0)
+    pivot: bool = True
 
     def __post_init__(self) -> None:
         """Validate.
 
         Raises:
-            ValueError: A value is not positive.
+            ValueError: A value is not positive, or ``pivot`` is not a bool.
         """
+        if not isinstance(self.pivot, bool):
+            raise ValueError(f"pivot must be true or false, got {self.pivot!r}")
         for name in self.__dataclass_fields__:
-            _positive(getattr(self, name), name)
+            if name != "pivot":
+                _positive(getattr(self, name), name)
 
 
 @dataclass
@@ -228,6 +234,12 @@ class KinematicStepper:
                     self._enter(t, side, "swing")
                     self._lift[side] = (t, soles[side].copy())
                     self._pivot.pop(side, None)
+                elif self.states[_OTHER[side]] != "swing":
+                    # Pivots only while the other foot swings: turning one anchored sole while
+                    # the other is anchored (or landing) twists the legs against both contacts
+                    # (on the front kicks such a pivot made the contacts give, the robot spun).
+                    # The person's turn is measured from here on.
+                    self._rebase_pivot(side, human_foot.get(side))
                 else:
                     pivot = self._pivot_anchor(side, human_foot.get(side))
                     if pivot is not None:
@@ -310,6 +322,14 @@ class KinematicStepper:
         self._since[side] = t
         self.log.append((t, "/".join(self.states[s] for s in SIDES)))
 
+    def _rebase_pivot(self, side: str, foot: tuple[float, np.ndarray] | None) -> None:
+        """Measure the person's pivot of ``side`` from now (its current foot and anchor)."""
+        if foot is None:
+            self._pivot.pop(side, None)
+            return
+        anchor_yaw = _yaw_of(self._anchor[side].rotation)
+        self._pivot[side] = (foot[0], np.array(foot[1][:2]), anchor_yaw, False)
+
     def _pivot_anchor(self, side: str, foot: tuple[float, np.ndarray] | None) -> pin.SE3 | None:
         """The ramped anchor of a stance foot that pivots, or ``None``.
 
@@ -317,7 +337,14 @@ class KinematicStepper:
         that turn exceeds ``pivot_yaw`` with the foot within ``pivot_radius`` of where it landed.
         """
         start = self._pivot.get(side)
-        if start is None or foot is None:
+        if foot is None or not self.settings.pivot:
+            return None
+        if start is None:
+            # The person's foot was not flat at touch-down (landed on the ball of the foot, a
+            # spin): the pivot is measured from the first flat sample of the stance (else a
+            # spinning dancer's stance foot never pivoted: spin heading error 98 deg).
+            anchor_yaw = _yaw_of(self._anchor[side].rotation)
+            self._pivot[side] = (foot[0], np.array(foot[1][:2]), anchor_yaw, False)
             return None
         yaw0, xy0, anchor_yaw0, active = start
         st = self.settings
