@@ -35,7 +35,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; return the exit code (errors print one clear line, exit 2)."""
+    """Run the command line; return the exit code.
+
+    0: done; 1: a user error (bad input, config or path), printed as one clear line; 2: a usage
+    error (argparse prints the usage line and the error); 130: interrupted (Ctrl-C).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -45,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except QPRetargetError as exc:
         print(f"qpretarget {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return 1
     except KeyboardInterrupt:
         print(f"qpretarget {args.command}: interrupted.", file=sys.stderr)
         return 130
@@ -63,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
         where = f" {exc.filename!r}" if exc.filename else ""
         print(f"qpretarget {args.command}: error: cannot write or read{where}: "
               f"{exc.strerror or exc}.", file=sys.stderr)  # fmt: skip
-        return 2
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -36,7 +36,7 @@ def test_info_command(capsys) -> None:
 
 
 def test_info_bad_target_exit_code(capsys) -> None:
-    assert main(["info", "g2"]) == 2
+    assert main(["info", "g2"]) == 1
     assert "neither a config file nor a bundled robot" in capsys.readouterr().err
 
 

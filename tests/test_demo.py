@@ -105,10 +105,10 @@ def test_retarget_command_on_a_walk_excerpt(tmp_path, capsys):
 
 def test_retarget_command_errors_are_one_line(tmp_path, capsys):
     config = str(_config_file(tmp_path))
-    assert main(["retarget", config, str(tmp_path / "nope.bvh"), "-o", "x.npz"]) == 2
+    assert main(["retarget", config, str(tmp_path / "nope.bvh"), "-o", "x.npz"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("qpretarget retarget: error:") and "does not exist" in err
-    assert main(["retarget", config, str(MOCAP / "cmu_16.asf"), "-o", "x.npz"]) == 2
+    assert main(["retarget", config, str(MOCAP / "cmu_16.asf"), "-o", "x.npz"]) == 1
     assert "load the AMC motion instead" in capsys.readouterr().err
 
 

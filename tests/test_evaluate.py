@@ -99,12 +99,12 @@ def test_evaluate_metrics_only_and_bad_pairs(runs, tmp_path, capsys):
     m = json.loads((tmp_path / "metrics.json").read_text())
     assert "per_frame" not in m and not list(tmp_path.glob("*.png"))
     assert (
-        main(["evaluate", str(after), "-o", str(tmp_path), "--pairs", "left_wrist_yaw_link"]) == 2
+        main(["evaluate", str(after), "-o", str(tmp_path), "--pairs", "left_wrist_yaw_link"]) == 1
     )
     assert "must be LINK_A:LINK_B" in capsys.readouterr().err
 
 
 def test_evaluate_missing_run_is_one_clear_line(tmp_path, capsys):
-    assert main(["evaluate", str(tmp_path / "nope.npz"), "-o", str(tmp_path)]) == 2
+    assert main(["evaluate", str(tmp_path / "nope.npz"), "-o", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert "does not exist" in err and "Traceback" not in err

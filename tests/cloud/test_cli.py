@@ -52,14 +52,14 @@ def test_retarget_cloud_writes_a_run(tmp_path, clouds, g1, capsys):
 def test_retarget_cloud_errors(tmp_path, clouds, capsys):
     cfg = tmp_path / "bad.yaml"
     cfg.write_text("robot: g1\nem: {outlier_wieght: 0.1}\n")
-    assert main(["retarget-cloud", str(cfg), str(clouds), "-o", str(tmp_path / "r.npz")]) == 2
+    assert main(["retarget-cloud", str(cfg), str(clouds), "-o", str(tmp_path / "r.npz")]) == 1
     assert "outlier_weight" in capsys.readouterr().err  # the close match is suggested
     good = tmp_path / "good.yaml"
     good.write_text(CONFIG)
-    assert main(["retarget-cloud", str(good), str(tmp_path / "none.npz"), "-o", "r.npz"]) == 2
+    assert main(["retarget-cloud", str(good), str(tmp_path / "none.npz"), "-o", "r.npz"]) == 1
     assert "does not exist" in capsys.readouterr().err
     np.save(tmp_path / "stack.npy", np.zeros((2, 5, 3)))
-    assert main(["retarget-cloud", str(good), str(tmp_path / "stack.npy"), "-o", "r.npz"]) == 2
+    assert main(["retarget-cloud", str(good), str(tmp_path / "stack.npy"), "-o", "r.npz"]) == 1
     assert "--rate" in capsys.readouterr().err
 
 
@@ -93,8 +93,8 @@ def test_make_cloud_then_retarget_cloud(tmp_path, mocap, g1, capsys):
     traj = RobotTrajectory.load(run)
     err = arm_direction_errors(g1, traj.q, HumanPoser(), human_q)
     assert err.max() <= 12.0, np.round(err.max(axis=0), 1)
-    # Bad input: one sentence, exit code 2.
-    assert main(["make-cloud", str(tmp_path / "none.bvh"), "-o", str(clouds)]) == 2
+    # Bad input: one sentence, exit code 1.
+    assert main(["make-cloud", str(tmp_path / "none.bvh"), "-o", str(clouds)]) == 1
     assert "does not exist" in capsys.readouterr().err
-    assert main(["make-cloud", clip, "-o", str(clouds), "--start", "1000"]) == 2
+    assert main(["make-cloud", clip, "-o", str(clouds), "--start", "1000"]) == 1
     assert "no frame selected" in capsys.readouterr().err

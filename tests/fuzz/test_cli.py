@@ -25,13 +25,14 @@ def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
 
 
 def _one_clear_line(r: subprocess.CompletedProcess) -> None:
-    """Exit 1/2, no traceback; the message is one line (after argparse's usage, for exit 2)."""
-    assert r.returncode in (1, 2), (r.returncode, r.stdout, r.stderr)
+    """Exit 1 for a user error, 2 for a usage error, no traceback; the message is one line
+    (after argparse's usage line, for exit 2)."""
     assert "Traceback" not in r.stderr, r.stderr
     lines = [s for s in r.stderr.strip().splitlines() if s.strip()]
     if lines and lines[0].startswith("usage:"):
         assert r.returncode == 2 and "error:" in lines[-1], r.stderr
     else:
+        assert r.returncode == 1, (r.returncode, r.stdout, r.stderr)
         assert len(lines) == 1, r.stderr
 
 
