@@ -430,6 +430,41 @@ class DistanceDamper(Constraint):
         return self.d_s
 
 
+def _trust_gap(trust_gap_fraction: float | None, pairs: Any) -> float:
+    """The ``trust_gap_fraction`` value (default: :data:`AUTO_TRUST_GAP` for auto pairs, else 0)."""
+    if trust_gap_fraction is None:
+        return AUTO_TRUST_GAP if pairs == "auto" else 0.0
+    if (
+        isinstance(trust_gap_fraction, bool)
+        or not isinstance(trust_gap_fraction, (int, float))
+        or not 0.0 <= trust_gap_fraction <= 1.0
+    ):
+        raise ConfigError(
+            f"trust_gap_fraction must be a number in [0, 1] or null, got {trust_gap_fraction!r}."
+        )
+    return float(trust_gap_fraction)
+
+
+def _check_pair_spec(pairs: Any, links: Any, include: Any) -> None:
+    """Check the pair keys: ``auto`` or a non-empty list of ``[link_a, link_b]``.
+
+    ``links`` and ``include`` go with ``auto`` only.
+    """
+    if isinstance(pairs, str):
+        if pairs != "auto":
+            raise ConfigError(f"pairs must be 'auto' or a list of [link_a, link_b], got {pairs!r}.")
+    elif not isinstance(pairs, Sequence) or not all(
+        isinstance(p, Sequence) and not isinstance(p, str) and len(p) == 2 for p in pairs
+    ):
+        raise ConfigError(f"pairs must be 'auto' or a list of [link_a, link_b], got {pairs!r}.")
+    elif len(pairs) == 0:
+        raise ConfigError("pairs is an empty list: give pairs or 'auto'.")
+    if links is not None and pairs != "auto":
+        raise ConfigError("`links` selects candidates for pairs: auto; drop it with a pair list.")
+    if include and pairs != "auto":
+        raise ConfigError("`include` adds pairs to pairs: auto; list them in `pairs` instead.")
+
+
 @CONSTRAINTS.register("self_collision")
 class SelfCollision(DistanceDamper):
     r"""Keep link pairs at least :math:`d_s` apart (velocity damper, module docstring).
@@ -515,40 +550,12 @@ class SelfCollision(DistanceDamper):
         self.optional = optional
         #: The robot has no collision geometry and the constraint is ``optional``: no rows.
         self.disabled = False
-        if trust_gap_fraction is None:
-            self.trust_gap = AUTO_TRUST_GAP if pairs == "auto" else 0.0
-        elif (
-            isinstance(trust_gap_fraction, bool)
-            or not isinstance(trust_gap_fraction, (int, float))
-            or not 0.0 <= trust_gap_fraction <= 1.0
-        ):
-            raise ConfigError(
-                "trust_gap_fraction must be a number in [0, 1] or null, got "
-                f"{trust_gap_fraction!r}."
-            )
-        else:
-            self.trust_gap = float(trust_gap_fraction)
-        if isinstance(pairs, str):
-            if pairs != "auto":
-                raise ConfigError(
-                    f"pairs must be 'auto' or a list of [link_a, link_b], got {pairs!r}."
-                )
-        elif not isinstance(pairs, Sequence) or not all(
-            isinstance(p, Sequence) and not isinstance(p, str) and len(p) == 2 for p in pairs
-        ):
-            raise ConfigError(f"pairs must be 'auto' or a list of [link_a, link_b], got {pairs!r}.")
-        elif len(pairs) == 0:
-            raise ConfigError("pairs is an empty list: give pairs or 'auto'.")
-        if links is not None and pairs != "auto":
-            raise ConfigError(
-                "`links` selects candidates for pairs: auto; drop it with a pair list."
-            )
+        self.trust_gap = _trust_gap(trust_gap_fraction, pairs)
+        _check_pair_spec(pairs, links, include)
         self._pairs_spec = pairs
         self._links_spec = None if links is None else [str(x) for x in links]
         self._exclude = [tuple(str(x) for x in p) for p in (exclude or [])]
         self._include = [tuple(str(x) for x in p) for p in (include or [])]
-        if include and pairs != "auto":
-            raise ConfigError("`include` adds pairs to pairs: auto; list them in `pairs` instead.")
         if any(len(p) != 2 for p in self._include):
             raise ConfigError(f"include must be a list of [link_a, link_b], got {include!r}.")
         if any(len(p) != 2 for p in self._exclude):
@@ -592,29 +599,7 @@ class SelfCollision(DistanceDamper):
         if self._pairs_spec == "auto":
             pairs = self._auto_pairs(robot, shapes, exclude, p)
         else:
-            pairs = []
-            seen: set[frozenset[str]] = set()
-            for k, pair in enumerate(self._pairs_spec):
-                a, b = (
-                    resolve_link(robot, shapes, str(x), f"{p}pairs[{k}][{i}]")
-                    for i, x in enumerate(pair)
-                )
-                key = frozenset((a, b))
-                if a == b:
-                    raise ConfigError(
-                        f"pair [{a}, {b}] names the same link twice.", path=f"{p}pairs[{k}]"
-                    )
-                if key in seen:
-                    raise ConfigError(f"pair [{a}, {b}] is listed twice.", path=f"{p}pairs[{k}]")
-                seen.add(key)
-                if key in exclude:
-                    self.left_out.setdefault("excluded in YAML", []).append((a, b))
-                    continue
-                if adjacent_links(robot, a, b, shapes):
-                    self.notes.append(
-                        f"pair {a}/{b} is adjacent (parent/child joint): kept as listed"
-                    )
-                pairs.append((a, b))
+            pairs = self._listed_pairs(robot, shapes, exclude, p)
         if not pairs:
             raise ConfigError("no collision pair is left after the exclusions.", path=f"{p}pairs")
         self.pairs = pairs
@@ -624,11 +609,45 @@ class SelfCollision(DistanceDamper):
             robot, pairs, geometry=self.geometry, broad_phase=self.broad_phase,
             hull_vertices=self.hull_vertices, path=f"{p}pairs",
         )  # fmt: skip
-        self.safety = np.full(len(pairs), self.d_s)
         # Distances in the reference posture (reported by describe()).
-        state = RobotState(robot)
-        self.reference_distances = self.model.compute_all(state)[0]
-        ref = self.reference_distances
+        self.reference_distances = self.model.compute_all(RobotState(robot))[0]
+        self.safety = self._safety_distances(pairs, self.reference_distances)
+        self._setup_rows(robot)
+
+    def _listed_pairs(
+        self,
+        robot: RobotModel,
+        shapes: dict[str, LinkShape],
+        exclude: set[frozenset[str]],
+        p: str,
+    ) -> list[tuple[str, str]]:
+        """The pairs of an explicit list, resolved to links, minus the excluded ones."""
+        pairs: list[tuple[str, str]] = []
+        seen: set[frozenset[str]] = set()
+        for k, pair in enumerate(self._pairs_spec):
+            a, b = (
+                resolve_link(robot, shapes, str(x), f"{p}pairs[{k}][{i}]")
+                for i, x in enumerate(pair)
+            )
+            key = frozenset((a, b))
+            if a == b:
+                raise ConfigError(
+                    f"pair [{a}, {b}] names the same link twice.", path=f"{p}pairs[{k}]"
+                )
+            if key in seen:
+                raise ConfigError(f"pair [{a}, {b}] is listed twice.", path=f"{p}pairs[{k}]")
+            seen.add(key)
+            if key in exclude:
+                self.left_out.setdefault("excluded in YAML", []).append((a, b))
+                continue
+            if adjacent_links(robot, a, b, shapes):
+                self.notes.append(f"pair {a}/{b} is adjacent (parent/child joint): kept as listed")
+            pairs.append((a, b))
+        return pairs
+
+    def _safety_distances(self, pairs: list[tuple[str, str]], ref: np.ndarray) -> np.ndarray:
+        r"""Per pair safety distance: ``d_s``, or :math:`\min(d_s, f\,d_{rest})` for auto pairs."""
+        safety = np.full(len(pairs), self.d_s)
         if self._pairs_spec != "auto":
             for (a, b), d in zip(pairs, ref, strict=True):
                 if d < self.d_s:
@@ -643,7 +662,7 @@ class SelfCollision(DistanceDamper):
             # stay apart).
             close = np.flatnonzero(self.rest_fraction * ref < self.d_s)
             if close.size:
-                self.safety[close] = self.rest_fraction * ref[close]
+                safety[close] = self.rest_fraction * ref[close]
                 examples = ", ".join(
                     f"{pairs[i][0]}/{pairs[i][1]} ({ref[i] * 1000:.1f} mm)" for i in close[:3]
                 )
@@ -653,7 +672,7 @@ class SelfCollision(DistanceDamper):
                     f"posture: their safety distance is {self.rest_fraction:g} x their rest "
                     f"distance: {examples}{more}"
                 )
-        self._setup_rows(robot)
+        return safety
 
     def _disable(self, robot: RobotModel, why: str) -> None:
         """``optional: true`` on a robot without collision geometry: no pairs, no rows."""

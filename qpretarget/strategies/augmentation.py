@@ -108,8 +108,31 @@ class Augmentation(Strategy):
         return [self._solver]
 
     def assemble(self, tp: TickProblem) -> QPProblem:
-        """Fill the QP of this tick (exposed for tests and solver comparisons)."""
-        Jw, rw, p = self._Jw, self._rw, self._problem
+        r"""Fill the QP of this tick (exposed for tests and solver comparisons).
+
+        Cost :math:`\tfrac12 |W_t^{1/2}(J v - v^*)|^2 + \tfrac12 \lambda^2 v^\top W v`
+        (Dariush 2009 4.3.1, CRAC eq. 10), and the soft rows' exact-penalty slacks when any
+        soft row is in play.
+        """
+        self._weighted_rows(tp)
+        H = self._Hv if self._soft_idx.size else self._problem.H
+        self._hessian(tp, H)
+        if not self._soft_idx.size:
+            p = self._problem
+            np.matmul(self._Jw.T, self._rw, out=p.g)
+            np.negative(p.g, out=p.g)
+            if p.n_in:
+                p.C[...] = tp.C
+                p.l[...] = tp.l
+                p.u[...] = tp.u
+            p.lb[...] = tp.lb
+            p.ub[...] = tp.ub
+            return p
+        return self._with_slacks(tp, H)
+
+    def _weighted_rows(self, tp: TickProblem) -> None:
+        """Every task's rows times the square root of its weights, stacked in ``_Jw``, ``_rw``."""
+        Jw, rw = self._Jw, self._rw
         blocks = tp.blocks
         J_all, v_all = tp.J_all, tp.v_all
         if (
@@ -128,22 +151,23 @@ class Augmentation(Strategy):
             sw = self._sw_all
             np.multiply(J_all, sw[:, None], out=Jw)
             np.multiply(v_all, sw, out=rw)
-        else:
-            i = 0
-            cache = self._sqrt_cache
-            for j, b in enumerate(blocks):
-                k = b.J.shape[0]
-                w, sw = cache[j]
-                if b.weight is not w:  # weights rarely change: reuse their square root
-                    sw = np.sqrt(b.weight)
-                    cache[j] = (b.weight, sw)
-                np.multiply(b.J, sw[:, None], out=Jw[i : i + k])
-                np.multiply(b.v_star, sw, out=rw[i : i + k])
-                i += k
-        ns = self._soft_idx.size
+            return
+        i = 0
+        cache = self._sqrt_cache
+        for j, b in enumerate(blocks):
+            k = b.J.shape[0]
+            w, sw = cache[j]
+            if b.weight is not w:  # weights rarely change: reuse their square root
+                sw = np.sqrt(b.weight)
+                cache[j] = (b.weight, sw)
+            np.multiply(b.J, sw[:, None], out=Jw[i : i + k])
+            np.multiply(b.v_star, sw, out=rw[i : i + k])
+            i += k
+
+    def _hessian(self, tp: TickProblem, H: np.ndarray) -> None:
+        r""":math:`H = J_w^\top J_w + \lambda^2 W` into ``H`` (nv, nv)."""
         nv = self.nv
-        H = self._Hv if ns else p.H
-        np.matmul(Jw.T, Jw, out=H)
+        np.matmul(self._Jw.T, self._Jw, out=H)
         lam2 = tp.damping * tp.damping
         if lam2 > 0:
             W = tp.W
@@ -155,18 +179,14 @@ class Augmentation(Strategy):
                 H.flat[:: nv + 1] += lam2
             else:
                 H += lam2 * W
-        if not ns:
-            np.matmul(Jw.T, rw, out=p.g)
-            np.negative(p.g, out=p.g)
-            if p.n_in:
-                p.C[...] = tp.C
-                p.l[...] = tp.l
-                p.u[...] = tp.u
-            p.lb[...] = tp.lb
-            p.ub[...] = tp.ub
-            return p
-        # Soft rows in play this tick (a finite side): one slack slot each, in row order, so a
-        # slack keeps its slot (and the solver its hot start) while the set does not change.
+
+    def _with_slacks(self, tp: TickProblem, H: np.ndarray) -> QPProblem:
+        """The QP with one slack slot per soft row in play (a finite side), in row order.
+
+        A slack keeps its slot (and the solver its hot start) while the set does not change.
+        """
+        nv = self.nv
+        p = self._problem
         idx = self._soft_idx
         up = np.isfinite(tp.u[idx])
         lo = np.isfinite(tp.l[idx]) & ~up
@@ -181,7 +201,7 @@ class Augmentation(Strategy):
         p.C[:, :nv] = tp.C
         p.C[rows, slots] = np.where(up[play], -1.0, 1.0)  # relax the finite side (upper first)
         p.H[:nv, :nv] = H
-        np.matmul(Jw.T, rw, out=self._gv)
+        np.matmul(self._Jw.T, self._rw, out=self._gv)
         np.negative(self._gv, out=p.g[:nv])
         p.g[nv:] = 0.0
         p.g[slots] = self._soft_w[play]
