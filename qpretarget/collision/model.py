@@ -305,54 +305,21 @@ class CollisionModel:
             :attr:`distances` (P,): exact where :attr:`exact`, lower bounds elsewhere.
         """
         t0 = time.perf_counter()
-        q = state.q
         lb = self.distances
-        ranked = nearest is not None and self.broad_phase and not self._fresh
-        if self._fresh or not self.broad_phase or influence == np.inf:
-            lb.fill(-np.inf)
-            self._fresh = False
-            ranked = False
-        else:
-            dq = pin.difference(self._model, self._q_last, q)
-            lb -= self._pair_lever @ np.abs(dq, out=dq)
-        self._q_last[:] = q
-        # Compute a pair while its bound is below the influence distance, and keep computing
-        # it until the bound exceeds influence + hysteresis (fewer on/off switches).
-        if self.hysteresis > 0:
-            if self._thr_key != (influence, self._flag_bytes):
-                np.copyto(self._thr, influence)
-                self._thr[self._flags] += self.hysteresis
-                self._thr_key = (influence, self._flag_bytes)
-            cand = lb < self._thr
-        else:
-            cand = lb < influence
+        full = self._fresh or not self.broad_phase or influence == np.inf
+        ranked = nearest is not None and not full  # a full update computes every candidate
+        cand = self._candidates(state.q, influence)
         off = self._zero if offset is None else offset
         need = cand & (lb - off < self._cut) if ranked else cand
         self._set_flags(need)
-        placed = False
-        t_gjk = 0.0
-        res = self._results
-        d = self._no_distance  # exact distances of the pairs self._idx, read once
-        if self._idx.size:
-            pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
-            placed = True
-            t1 = time.perf_counter()
-            pin.computeDistances(self.gmodel, self.gdata)
-            t_gjk = time.perf_counter() - t1
-            d = np.array([res[i].min_distance for i in self._idx_list])
-            lb[self._idx] = d
+        self.last_gjk_time = 0.0
+        d = self._exact_distances(state, placed=False)
         if ranked and nearest is not None:
             g = d - off[self._idx]
             found = int(np.count_nonzero((g < self._cut) & (d < influence)))
             if found < nearest and (cand & ~need).any():  # second round: every candidate
                 self._set_flags(cand)
-                if not placed:
-                    pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
-                t1 = time.perf_counter()
-                pin.computeDistances(self.gmodel, self.gdata)
-                t_gjk += time.perf_counter() - t1
-                d = np.array([res[i].min_distance for i in self._idx_list])
-                lb[self._idx] = d
+                d = self._exact_distances(state, placed=bool(need.any()))
         idx = self._idx
         close = d < influence
         act = idx[close]
@@ -364,16 +331,52 @@ class CollisionModel:
                 else np.inf
             )
         self.exact = self._flags
-        sel = [res[i] for i in act.tolist()]
         self.active = act
         # Witness points and normals are read from the results on demand (:meth:`witnesses`):
         # each read crosses into C++, and capped rows need only the closest pairs'.
-        self._sel = sel
+        res = self._results
+        self._sel = [res[i] for i in act.tolist()]
         self._pa = self._n = None
         self.last_n_computed = int(idx.size)
-        self.last_gjk_time = t_gjk
         self.last_update_time = time.perf_counter() - t0
         return lb
+
+    def _candidates(self, q: np.ndarray, influence: float) -> np.ndarray:
+        """Lower bounds of every distance after the motion since the last call; the candidates.
+
+        A pair is a candidate while its bound is below the influence distance, and stays one
+        until the bound exceeds influence + hysteresis (fewer on/off switches). A fresh call, a
+        broad phase switched off or an infinite influence makes every pair a candidate.
+        """
+        lb = self.distances
+        if self._fresh or not self.broad_phase or influence == np.inf:
+            lb.fill(-np.inf)
+            self._fresh = False
+        else:
+            dq = pin.difference(self._model, self._q_last, q)
+            lb -= self._pair_lever @ np.abs(dq, out=dq)
+        self._q_last[:] = q
+        if self.hysteresis > 0:
+            if self._thr_key != (influence, self._flag_bytes):
+                np.copyto(self._thr, influence)
+                self._thr[self._flags] += self.hysteresis
+                self._thr_key = (influence, self._flag_bytes)
+            return lb < self._thr
+        return lb < influence
+
+    def _exact_distances(self, state: RobotState, *, placed: bool) -> np.ndarray:
+        """Exact (coal) distances of the active pairs (:attr:`_idx`), written into the bounds."""
+        if not self._idx.size:
+            return self._no_distance
+        if not placed:
+            pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
+        t1 = time.perf_counter()
+        pin.computeDistances(self.gmodel, self.gdata)
+        self.last_gjk_time += time.perf_counter() - t1
+        res = self._results
+        d = np.array([res[i].min_distance for i in self._idx_list])
+        self.distances[self._idx] = d
+        return d
 
     def _set_flags(self, need: np.ndarray) -> None:
         """Switch the geometry data's active pairs to ``need`` (only the changed ones)."""
