@@ -180,7 +180,8 @@ class EMConfig:
             at the previous pass's fit (the first pass uses the predicted pose).
         occlusion_cell: also leave out template points hidden behind other parts, by a point
             z-buffer of this cell size [m] (0: off).
-        prediction: ``ar3`` (third-order auto-regression, V.B) or ``constant``.
+        prediction: ``ar3`` (third-order auto-regression, V.B), ``velocity`` (constant
+            velocity: the last frame-to-frame step repeated) or ``constant`` (the last pose).
         ar_window: frames used to fit the auto-regression.
         damping: Levenberg-Marquardt damping relative to the mean diagonal of H.
     """
@@ -251,7 +252,7 @@ _CHOICES = {
     ("template", "skinning"): ("rigid", "lbs"),
     ("em", "estep"): ("kdtree", "dense"),
     ("calibration", "centre_axes"): ("limb", "free"),
-    ("em", "prediction"): ("ar3", "constant"),
+    ("em", "prediction"): ("ar3", "velocity", "constant"),
     ("em", "temporal_reference"): ("previous", "prediction"),
     ("stability", "mode"): ("qp", "hip_offset", "none"),
     ("stability", "region"): ("polygon", "inscribed_circle"),

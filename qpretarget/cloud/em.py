@@ -1400,6 +1400,8 @@ class CloudRetargeter:
         if self.config.em.prediction == "constant" or len(h) < 2:
             return h[-1].copy()
         model = self.model
+        if self.config.em.prediction == "velocity":  # q_t + (q_t - q_{t-1})
+            return pin.integrate(model, h[-1], pin.difference(model, h[-2], h[-1]))
         W = self.config.em.ar_window
         hh = h[-(W + 1) :]
         u = np.array([pin.difference(model, a, b) for a, b in zip(hh[:-1], hh[1:], strict=True)])

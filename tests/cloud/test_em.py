@@ -183,3 +183,22 @@ def test_contact_term_flattens_supporting_soles_and_keeps_monotonicity(g1, frame
     # the true soles are flat), 0.11 / 0.13 deg with it.
     assert np.all(tilts[1.0e4] < 0.5 * tilts[0.0])
     assert np.degrees(tilts[1.0e4].max()) < 0.5
+
+
+def test_constant_velocity_prediction(g1, g1_template):
+    """``em.prediction: velocity`` starts a frame at q_t + (q_t - q_{t-1}) (on the manifold)."""
+    fit = CloudRetargeter(
+        {"robot": "g1", "calibration": {"enabled": False}, "em": {"prediction": "velocity"}},
+        robot=g1,
+        template=g1_template,
+    )
+    q0 = g1.q_reference.copy()
+    q1 = q0.copy()
+    q1[7:] += 0.01
+    q1[:3] += [0.02, 0.0, 0.0]
+    fit.history = [q0, q1]
+    step = pin.difference(g1.model, q0, q1)
+    # Exact up to round-off of the exponential map (1e-12).
+    assert np.allclose(pin.difference(g1.model, q1, fit.predict()), step, atol=1e-12)
+    fit.history = [q1]  # one pose: hold it
+    assert np.allclose(fit.predict(), q1)
