@@ -224,37 +224,55 @@ def retarget_pose(
     for value, what, low in ((max_iterations, "max_iterations", 1), (restarts, "restarts", 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ConfigError(f"{what} must be an integer >= {low}, got {value!r}.")
-    src = np.asarray(source, dtype=float)
-    if not np.all(np.isfinite(src)):
-        raise TargetError("offline retargeting needs finite source points.", task=shape.name)
-    if src.ndim != 2 or src.shape[0] < 2 or src.shape[1] != 3:
-        raise TargetError(
-            f"source must be an (n >= 2, 3) array of points, got shape {src.shape}.",
-            task=shape.name,
-        )
-    best = _solve_from_current(controller, shape, src, tol, max_iterations, max_step, max_damping)
+    src = _source_points(source, shape.name)
+    settings = (tol, max_iterations, max_step, max_damping)
+    best = _solve_from_current(controller, shape, src, *settings)
     if restarts:
         gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-        best_cost = total_cost(controller)
-        total_iterations = best.iterations
-        robot = controller.robot
-        qi = robot.joint_q_index
-        lo = np.where(np.isfinite(robot.q_min[qi]), robot.q_min[qi], -np.pi)
-        hi = np.where(np.isfinite(robot.q_max[qi]), robot.q_max[qi], np.pi)
-        for _ in range(restarts):
-            q = best.q.copy()
-            q[qi] = gen.uniform(lo, hi)
-            controller.reset(q)
-            res = _solve_from_current(
-                controller, shape, src, tol, max_iterations, max_step, max_damping
-            )
-            total_iterations += res.iterations
-            cost = total_cost(controller)
-            if cost < best_cost:
-                best, best_cost = res, cost
-        controller.reset(best.q)
-        shape.set_target(src)
-        best.iterations = total_iterations
+        best = _best_of_restarts(controller, shape, src, settings, best, restarts, gen)
+    return best
+
+
+def _source_points(source: npt.ArrayLike, task: str) -> np.ndarray:
+    """``source`` as finite (n >= 2, 3) points; :class:`TargetError` otherwise."""
+    src = np.asarray(source, dtype=float)
+    if not np.all(np.isfinite(src)):
+        raise TargetError("offline retargeting needs finite source points.", task=task)
+    if src.ndim != 2 or src.shape[0] < 2 or src.shape[1] != 3:
+        raise TargetError(
+            f"source must be an (n >= 2, 3) array of points, got shape {src.shape}.", task=task
+        )
+    return src
+
+
+def _best_of_restarts(
+    controller: Controller,
+    shape: ChainShapeTask,
+    src: np.ndarray,
+    settings: tuple[float, int, float, float],
+    best: PoseResult,
+    restarts: int,
+    gen: np.random.Generator,
+) -> PoseResult:
+    """The lowest-cost result of ``best`` and ``restarts`` random starts inside the limits."""
+    best_cost = total_cost(controller)
+    total_iterations = best.iterations
+    robot = controller.robot
+    qi = robot.joint_q_index
+    lo = np.where(np.isfinite(robot.q_min[qi]), robot.q_min[qi], -np.pi)
+    hi = np.where(np.isfinite(robot.q_max[qi]), robot.q_max[qi], np.pi)
+    for _ in range(restarts):
+        q = best.q.copy()
+        q[qi] = gen.uniform(lo, hi)
+        controller.reset(q)
+        res = _solve_from_current(controller, shape, src, *settings)
+        total_iterations += res.iterations
+        cost = total_cost(controller)
+        if cost < best_cost:
+            best, best_cost = res, cost
+    controller.reset(best.q)
+    shape.set_target(src)
+    best.iterations = total_iterations
     return best
 
 
