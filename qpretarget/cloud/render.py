@@ -627,13 +627,19 @@ def clip_cloud_sequence(
     full Kinect V2 resolution (about 9,000 points on the person at 2.8 m).
 
     Raises:
-        ConfigError: a rate, start or duration that selects no frame.
+        ConfigError: a rate <= 0, a negative start, a duration <= 0, or a start past the clip's
+            end.
     """
     from ..motion import load_motion
     from ..motion.keypoints import keypoint_orientations, keypoint_positions
 
     if not rate > 0:
         raise ConfigError(f"the rate must be > 0 Hz, got {rate}.")
+    if start < 0 or (duration is not None and not duration > 0):
+        raise ConfigError(
+            f"need start >= 0 s and duration > 0 s (or none: to the end), got start {start}, "
+            f"duration {duration}."
+        )
     motion = load_motion(clip)
     t = np.asarray(motion.t, float)
     t_end = float(t[-1]) if duration is None else min(float(t[-1]), start + float(duration))

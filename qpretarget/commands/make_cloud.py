@@ -67,6 +67,11 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--{name} must be > 0, got {getattr(args, name)}.")
     if args.noise < 0 or not 0 <= args.outliers < 1 or args.downscale < 1:
         raise ConfigError("need --noise >= 0, 0 <= --outliers < 1 and --downscale >= 1.")
+    if args.start < 0 or args.duration < 0:
+        raise ConfigError(
+            f"need --start >= 0 and --duration >= 0 (0: to the end), got {args.start} and "
+            f"{args.duration}."
+        )
     syn, _ = clip_cloud_sequence(
         args.clip,
         rate=args.rate,

@@ -98,3 +98,5 @@ def test_make_cloud_then_retarget_cloud(tmp_path, mocap, g1, capsys):
     assert "does not exist" in capsys.readouterr().err
     assert main(["make-cloud", clip, "-o", str(clouds), "--start", "1000"]) == 1
     assert "no frame selected" in capsys.readouterr().err
+    assert main(["make-cloud", clip, "-o", str(clouds), "--start", "-1"]) == 1
+    assert "--start >= 0" in capsys.readouterr().err
