@@ -98,16 +98,18 @@ def test_a_pivoting_stance_foot_turns_its_anchor_at_the_pivot_rate():
     assert (
         "left" not in st2.update(0.01, {"left": True, "right": True}, soles, soles, foot2).anchors
     )
-    # A 40 deg turn with both feet standing (the legs would twist against both contacts), or
-    # with pivot: false, moves nothing either.
-    for settings3, support in ((settings, {"left": True, "right": True}),
-                               (StepSettings(pivot=False), one)):  # fmt: skip
+    # A 40 deg turn with both feet standing (the legs would twist against both contacts), under
+    # a kick (the other foot's target 0.5 m up), or with pivot: false, moves nothing either.
+    kick = {"left": soles["left"], "right": _flat(0.3, -0.1, 0.5)}
+    for settings3, support, desired3 in ((settings, {"left": True, "right": True}, soles),
+                                         (settings, one, kick),
+                                         (StepSettings(pivot=False), one, soles)):  # fmt: skip
         st3 = KinematicStepper(settings3, dt=0.01)
         foot3 = {"left": (0.0, np.array([0.0, 0.1, 0.08])), "right": None}
         st3.update(0.0, {"left": True, "right": True}, soles, soles, foot3)
         foot3["left"] = (math.radians(40.0), np.array([0.0, 0.1, 0.08]))
         for k in range(10, 50):
-            assert "left" not in st3.update(0.01 * k, support, soles, soles, foot3).anchors
+            assert "left" not in st3.update(0.01 * k, support, soles, desired3, foot3).anchors
 
 
 def test_a_slow_foot_near_the_floor_is_stood_on_when_the_other_is_up():
