@@ -37,6 +37,17 @@ class QPProblem:
         self.lb = np.full(n, -np.inf)
         self.ub = np.full(n, np.inf)
 
+    def set_constraints(
+        self, C: np.ndarray, l: np.ndarray, u: np.ndarray, lb: np.ndarray, ub: np.ndarray
+    ) -> None:
+        """Copy rows ``l <= C x <= u`` (when the problem has rows) and the box ``lb, ub``."""
+        if self.n_in:
+            self.C[...] = C
+            self.l[...] = l
+            self.u[...] = u
+        self.lb[...] = lb
+        self.ub[...] = ub
+
     def copy(self) -> QPProblem:
         """Deep copy."""
         p = QPProblem(self.n, self.n_in)

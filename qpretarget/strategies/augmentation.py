@@ -29,7 +29,15 @@ import numpy as np
 from ..problem import QPProblem
 from ..robot import RobotModel
 from ..solvers import QPSolver
-from .base import STRATEGIES, SoftRows, Strategy, StrategyResult, TickProblem, solution_to_result
+from .base import (
+    STRATEGIES,
+    SoftRows,
+    Strategy,
+    StrategyResult,
+    TaskDims,
+    TickProblem,
+    solution_to_result,
+)
 
 
 @STRATEGIES.register("augmentation")
@@ -50,11 +58,7 @@ class Augmentation(Strategy):
         self._soft_idx = np.zeros(0, dtype=int)
 
     def bind(
-        self,
-        robot: RobotModel,
-        task_dims: list[tuple[str, int, int]],
-        n_rows: int,
-        solver_factory: Any,
+        self, robot: RobotModel, task_dims: TaskDims, n_rows: int, solver_factory: Any
     ) -> None:
         super().bind(robot, task_dims, n_rows, solver_factory)
         m = sum(d for _, d, _ in task_dims)
@@ -121,12 +125,7 @@ class Augmentation(Strategy):
             p = self._problem
             np.matmul(self._Jw.T, self._rw, out=p.g)
             np.negative(p.g, out=p.g)
-            if p.n_in:
-                p.C[...] = tp.C
-                p.l[...] = tp.l
-                p.u[...] = tp.u
-            p.lb[...] = tp.lb
-            p.ub[...] = tp.ub
+            p.set_constraints(tp.C, tp.l, tp.u, tp.lb, tp.ub)
             return p
         return self._with_slacks(tp, H)
 

@@ -94,17 +94,17 @@ class SoftRows:
     weight: float
 
 
+#: Tasks of a controller as ``(name, dim, level)``, in stacking order.
+TaskDims = list[tuple[str, int, int]]
+
+
 class Strategy(abc.ABC):
     """A task-management scheme."""
 
     type_name: ClassVar[str] = "strategy"
 
     def bind(
-        self,
-        robot: RobotModel,
-        task_dims: list[tuple[str, int, int]],
-        n_rows: int,
-        solver_factory: Any,
+        self, robot: RobotModel, task_dims: TaskDims, n_rows: int, solver_factory: Any
     ) -> None:
         """Preallocate for tasks ``(name, dim, level)``, ``n_rows`` constraint rows.
 

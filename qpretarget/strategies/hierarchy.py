@@ -65,7 +65,7 @@ from ..problem import QPProblem
 from ..robot import RobotModel
 from ..solvers.base import QPSolver
 from ..validation import positive_float
-from .base import STRATEGIES, Strategy, StrategyResult, TickProblem
+from .base import STRATEGIES, Strategy, StrategyResult, TaskDims, TickProblem
 
 
 def level_dampings(
@@ -154,11 +154,7 @@ class Hierarchy(Strategy):
         self._levels: list[_Level] = []
 
     def bind(
-        self,
-        robot: RobotModel,
-        task_dims: list[tuple[str, int, int]],
-        n_rows: int,
-        solver_factory: Any,
+        self, robot: RobotModel, task_dims: TaskDims, n_rows: int, solver_factory: Any
     ) -> None:
         super().bind(robot, task_dims, n_rows, solver_factory)
         nv = robot.nv
@@ -212,12 +208,7 @@ class Hierarchy(Strategy):
             p.H[...] = Hv
             np.matmul(Jw.T, rw, out=p.g)
             np.negative(p.g, out=p.g)
-            if nr:
-                p.C[...] = tp.C
-                p.l[...] = tp.l
-                p.u[...] = tp.u
-            p.lb[...] = tp.lb
-            p.ub[...] = tp.ub
+            p.set_constraints(tp.C, tp.l, tp.u, tp.lb, tp.ub)
             return p
         assert x_above is not None, "a level below the first needs the solution above it"
         # v = x + Z z: cost 1/2 z'Z'Hv Z z + z'Z'(Hv x + g_v), with g_v = -Jw' rw.

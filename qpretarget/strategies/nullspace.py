@@ -69,7 +69,7 @@ from scipy.linalg import solve_triangular
 from ..errors import ConfigError, close_matches_hint
 from ..robot import RobotModel
 from ..validation import positive_float
-from .base import STRATEGIES, Strategy, StrategyResult, TickProblem
+from .base import STRATEGIES, Strategy, StrategyResult, TaskDims, TickProblem
 from .hierarchy import level_dampings
 
 VARIANTS = ("dariush", "poubel")
@@ -213,8 +213,21 @@ def row_constraints_error(strategy: str, n_rows: int) -> ConfigError:
     )
 
 
+class ClosedFormStrategy(Strategy):
+    """A closed-form baseline: no QP, so constraint rows cannot hold (``ignore_rows`` to run)."""
+
+    ignore_rows: bool = False
+
+    def bind(
+        self, robot: RobotModel, task_dims: TaskDims, n_rows: int, solver_factory: Any
+    ) -> None:
+        super().bind(robot, task_dims, n_rows, solver_factory)
+        if n_rows and not self.ignore_rows:
+            raise row_constraints_error(self.type_name, n_rows)
+
+
 @STRATEGIES.register("nullspace")
-class NullSpace(Strategy):
+class NullSpace(ClosedFormStrategy):
     r"""Closed-form prioritized inverse kinematics (no QP), the reference baseline.
 
     Args:
@@ -267,15 +280,9 @@ class NullSpace(Strategy):
         self.rank_tolerance = positive_float(rank_tolerance, "rank_tolerance")
 
     def bind(
-        self,
-        robot: RobotModel,
-        task_dims: list[tuple[str, int, int]],
-        n_rows: int,
-        solver_factory: Any,
+        self, robot: RobotModel, task_dims: TaskDims, n_rows: int, solver_factory: Any
     ) -> None:
         super().bind(robot, task_dims, n_rows, solver_factory)
-        if n_rows and not self.ignore_rows:
-            raise row_constraints_error(self.type_name, n_rows)
         names = [n for n, _, _ in task_dims]
         for t in self.optimization_tasks:
             if t not in names:

@@ -74,8 +74,8 @@ from ..constraints.self_collision import resolve_link
 from ..errors import ConfigError
 from ..robot import LWA, RobotModel, RobotState
 from ..validation import positive_float
-from .base import STRATEGIES, Strategy, StrategyResult, TickProblem
-from .nullspace import clamping_loop, row_constraints_error, weighted_prioritized_dls
+from .base import STRATEGIES, StrategyResult, TaskDims, TickProblem
+from .nullspace import ClosedFormStrategy, clamping_loop, weighted_prioritized_dls
 
 
 def blending(d: np.ndarray | float, critical_distance: float, alpha: float, delta: float) -> Any:
@@ -93,7 +93,7 @@ def blending_reach(critical_distance: float, alpha: float, delta: float, level: 
 
 
 @STRATEGIES.register("redirection")
-class Redirection(Strategy):
+class Redirection(ClosedFormStrategy):
     r"""Closed-form tracking with self-collision redirection and blending (Dariush 2009 eq. 17-23).
 
     Args:
@@ -154,15 +154,9 @@ class Redirection(Strategy):
         self._bound = False  # set by bind (the collision model exists from then on)
 
     def bind(
-        self,
-        robot: RobotModel,
-        task_dims: list[tuple[str, int, int]],
-        n_rows: int,
-        solver_factory: Any,
+        self, robot: RobotModel, task_dims: TaskDims, n_rows: int, solver_factory: Any
     ) -> None:
         super().bind(robot, task_dims, n_rows, solver_factory)
-        if n_rows and not self.ignore_rows:
-            raise row_constraints_error(self.type_name, n_rows)
         shapes = link_shapes(robot, self.geometry)
         pairs: list[tuple[str, str]] = []
         for k, pair in enumerate(self.pair_spec):
