@@ -25,6 +25,7 @@ from .robots import (
     robots_directory,
     share_directory,
 )
+from .validation import check_keys
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: Prefix of a path inside example-robot-data's robots directory, e.g.
@@ -364,15 +365,7 @@ def load_robot(spec: str | Mapping[str, Any] | RobotModel, *, path: str = "robot
         "name", "urdf", "srdf", "free_flyer", "reference", "reference_joints", "feet",
         "keyframes", "position_limits", "velocity_limits", "place_on_ground",
     }  # fmt: skip
-    for key in spec:
-        if key not in allowed:
-            from .errors import close_matches_hint
-
-            raise ConfigError(
-                f"unknown key {key!r}.{close_matches_hint(key, sorted(allowed))} "
-                f"Allowed: {', '.join(sorted(allowed))}.",
-                path=f"{path}.{key}",
-            )
+    check_keys(spec, sorted(allowed), path)
     feet = spec.pop("feet", None)
     if feet is not None:
         if not isinstance(feet, Mapping):

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .errors import ConfigError
+from .errors import ConfigError, close_matches_hint
 
 
 def positive_float(value: Any, name: str, *, allow_zero: bool = False) -> float:
@@ -33,3 +33,21 @@ def weight_vector(value: npt.ArrayLike, dim: int, name: str) -> np.ndarray:
     if np.any(~np.isfinite(arr)) or np.any(arr < 0):
         raise ConfigError(f"{name} must be finite and >= 0, got {value!r}.")
     return np.broadcast_to(arr, (dim,)).astype(float).copy()
+
+
+def check_keys(
+    spec: Any, allowed: Any, path: str, *, what: str = "key", listed: str = "Allowed"
+) -> None:
+    """Refuse a YAML mapping key not in ``allowed``: one message with close names and the path.
+
+    Raises:
+        ConfigError: ``unknown {what} 'k'. Did you mean ...? {listed}: a, b.`` at ``path.k``.
+    """
+    names = [str(a) for a in allowed]
+    for key in spec:
+        if key not in allowed:
+            raise ConfigError(
+                f"unknown {what} {key!r}.{close_matches_hint(str(key), names)} "
+                f"{listed}: {', '.join(names)}.",
+                path=f"{path}.{key}",
+            )

@@ -45,7 +45,7 @@ from ..problem import QPProblem
 from ..solvers import make_solver
 from ..solvers.daqp_ import DaqpSolver
 from ..strategies import TickProblem
-from ..validation import positive_float
+from ..validation import check_keys, positive_float
 
 _KEYS = ("enabled", "ratio", "report_tolerance", "solver", "hard")
 #: Bound constraints the fallback never widens by default: the actuators' velocity limits.
@@ -91,13 +91,7 @@ def make_fallback(controller: Any, spec: Mapping[str, Any] | None) -> Fallback |
             f"got {spec!r}.",
             path="fallback",
         )
-    for key in spec:
-        if key not in _KEYS:
-            raise ConfigError(
-                f"unknown key {key!r}.{close_matches_hint(str(key), _KEYS)} Allowed keys: "
-                f"{', '.join(_KEYS)}.",
-                path=f"fallback.{key}",
-            )
+    check_keys(spec, _KEYS, "fallback", listed="Allowed keys")
     enabled = spec.get("enabled", True)
     if not isinstance(enabled, bool):
         raise ConfigError(

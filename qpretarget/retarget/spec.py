@@ -22,6 +22,7 @@ from ..motion.phases import SIDES, PhaseThresholds, SequencerSettings
 from ..motion.scaling import SCALING_METHODS
 from ..tasks.com import ComTask
 from ..tasks.frame import FrameTask
+from ..validation import check_keys
 from .stepping import StepSettings
 
 #: Keys of the ``retarget:`` section.
@@ -53,13 +54,7 @@ def _mapping(value: Any, path: str, what: str) -> dict[str, Any]:
 
 
 def _check_keys(spec: Mapping[str, Any], allowed: Sequence[str], path: str) -> None:
-    for key in spec:
-        if key not in allowed:
-            raise ConfigError(
-                f"unknown key {key!r}.{close_matches_hint(str(key), allowed)} "
-                f"Allowed: {', '.join(allowed)}.",
-                path=f"{path}.{key}",
-            )
+    check_keys(spec, allowed, path)
 
 
 def _number(value: Any, path: str, *, positive: bool = True, integer: bool = False) -> float:

@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import ConfigError, SolverError, close_matches_hint
 from ..problem import QPProblem
 from ..registry import Registry
+from ..validation import check_keys
 
 
 @dataclass(slots=True)
@@ -64,14 +65,7 @@ class QPSolver(abc.ABC):
         Raises:
             ConfigError: an option not in :attr:`OPTIONS` (with close names).
         """
-        allowed = cls.OPTIONS
-        for key in options:
-            if key not in allowed:
-                raise ConfigError(
-                    f"unknown {cls.label} option {key!r}.{close_matches_hint(key, allowed)} "
-                    f"Options: {', '.join(allowed)}.",
-                    path=f"{path}.{key}",
-                )
+        check_keys(options, cls.OPTIONS, path, what=f"{cls.label} option", listed="Options")
         return cls(**options)
 
     @classmethod
