@@ -297,3 +297,34 @@ def solve_time_stats(solve_time: npt.ArrayLike | None) -> dict[str, float | None
         "mean_ms": float(np.mean(s)),
         "ticks": int(len(s)),
     }
+
+
+def support_displacement(
+    positions: npt.ArrayLike, contact: npt.ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Displacement of a sole since the start of its current support phase (foot slip).
+
+    For each frame :math:`k` in contact, with :math:`k_0` the first frame of its contact phase:
+    horizontal :math:`|p_{k,xy} - p_{k_0,xy}|` and vertical :math:`|p_{k,z} - p_{k_0,z}|`;
+    ``nan`` while the foot is not in contact.
+
+    Args:
+        positions: (T, 3) sole frame positions [m].
+        contact: (T,) the foot supports.
+
+    Returns:
+        ``(horizontal, vertical)``, each (T,) [m].
+    """
+    p = np.asarray(positions, float)
+    c = np.asarray(contact, bool)
+    start = np.full(len(c), -1)
+    s = -1
+    for k, on in enumerate(c.tolist()):
+        s = (k if s < 0 else s) if on else -1
+        start[k] = s
+    h = np.full(len(p), np.nan)
+    v = np.full(len(p), np.nan)
+    on = start >= 0
+    h[on] = np.linalg.norm(p[on, :2] - p[start[on], :2], axis=1)
+    v[on] = np.abs(p[on, 2] - p[start[on], 2])
+    return h, v

@@ -30,6 +30,7 @@ from .measures import (
     joint_limit_violations,
     rnea_torques,
     signed_distance_to_polygon,
+    support_displacement,
     tangent_velocities,
 )
 from .pair_distances import GeometryPairDistances, LinkPairDistances, collision_model_for
@@ -171,20 +172,6 @@ def _foot_geometry(robot: RobotModel, controller: Any, name: str) -> tuple[int, 
         f"contact {name!r} of the run is neither a foot of robot {robot.name!r} "
         f"({', '.join(robot.feet)}) nor a contact of its config."
     )
-
-
-def _support_phases(contact: np.ndarray) -> np.ndarray:
-    """Index of the first frame of the current contact phase, per frame (-1 when not in contact)."""
-    start = np.full(len(contact), -1)
-    s = -1
-    for k, c in enumerate(contact):
-        if c:
-            if s < 0:
-                s = k
-            start[k] = s
-        else:
-            s = -1
-    return start
 
 
 def compute_series(
@@ -359,13 +346,7 @@ def _foot_slip(
     """
     slip, lift = {}, {}
     for i, (f, p) in enumerate(soles.items()):
-        start = _support_phases(contacts[:, i])
-        s = np.full(len(p), np.nan)
-        z = np.full(len(p), np.nan)
-        on = start >= 0
-        s[on] = np.linalg.norm(p[on, :2] - p[start[on], :2], axis=1)
-        z[on] = np.abs(p[on, 2] - p[start[on], 2])
-        slip[f], lift[f] = s, z
+        slip[f], lift[f] = support_displacement(p, contacts[:, i])
     return slip, lift
 
 

@@ -10,6 +10,12 @@ import numpy as np
 import pinocchio as pin
 
 from ..analysis.human_metrics import format_human_metrics, human_metrics_or_reason
+from ..analysis.measures import (
+    JOINT_LIMIT_TOLERANCE,
+    joint_limit_violations,
+    rmse,
+    support_displacement,
+)
 from ..control.controller import Controller
 from ..trajectory import RobotTrajectory
 
@@ -42,48 +48,9 @@ def summarize_run(
     if wall_time:
         out["ticks_per_second"] = T / wall_time
         out["wall_time"] = wall_time
-    rmse = {}
-    for name in traj.task_names:
-        tgt = np.asarray(traj.targets[name], float)
-        act = np.asarray(traj.actual[name], float)
-        ok = np.all(np.isfinite(tgt), axis=1)
-        if ok.any():
-            rmse[name] = float(np.sqrt(np.mean(np.sum((tgt[ok] - act[ok]) ** 2, axis=1)))) * 1e3
-    out["rmse_mm"] = rmse
-    qi = robot.joint_q_index
-    lo, hi = robot.q_min[qi], robot.q_max[qi]
-    qj = q[:, qi]
-    viol = (qj < lo - 1e-6) | (qj > hi + 1e-6)
-    out["joint_limit_violations"] = int(viol.sum())
-    if viol.any():
-        worst_joint = np.argmax(np.max(np.maximum(lo - qj, qj - hi), axis=0))
-        out["worst_joint"] = robot.joint_names[int(worst_joint)]
-    drift = {}
-    if traj.contacts is not None and np.asarray(traj.contacts).size:
-        model, data = robot.model, robot.model.createData()
-        contacts = np.asarray(traj.contacts, bool)
-        ids = [robot.frame_id(robot.feet[f].frame) if f in robot.feet else robot.frame_id(f)
-               for f in traj.foot_names]  # fmt: skip
-        soles = np.empty((T, len(ids), 3))
-        for k in range(T):
-            pin.framesForwardKinematics(model, data, q[k])
-            for i, fid in enumerate(ids):
-                soles[k, i] = data.oMf[fid].translation
-        for i, name in enumerate(traj.foot_names):
-            worst = 0.0
-            k = 0
-            while k < T:
-                if contacts[k, i]:
-                    j = k
-                    while j < T and contacts[j, i]:
-                        j += 1
-                    d = np.linalg.norm(soles[k:j, i] - soles[k, i], axis=1)
-                    worst = max(worst, float(d.max()))
-                    k = j
-                else:
-                    k += 1
-            drift[name] = worst * 1e3
-    out["feet_drift_mm"] = drift
+    out["rmse_mm"] = _task_rmse_mm(traj)
+    out.update(_limit_violations(robot, q))
+    out["feet_drift_mm"] = _feet_drift_mm(robot, traj, q)
     statuses, counts = np.unique(np.asarray(traj.status, dtype=str), return_counts=True)
     out["status"] = {str(s): int(c) for s, c in zip(statuses, counts, strict=True)}
     support = traj.extra.get("support_state")
@@ -107,6 +74,57 @@ def summarize_run(
             "p95": float(np.percentile(st, 95)) * 1e3,
         }
     return out
+
+
+def _task_rmse_mm(traj: RobotTrajectory) -> dict[str, float]:
+    """Per position task, :func:`~qpretarget.analysis.measures.rmse` of the run [mm]."""
+    out = {}
+    for name in traj.task_names:
+        tgt = np.asarray(traj.targets[name], float)
+        act = np.asarray(traj.actual[name], float)
+        if np.all(np.isfinite(tgt), axis=1).any():
+            out[name] = rmse(tgt, act) * 1e3
+    return out
+
+
+def _limit_violations(robot: Any, q: np.ndarray) -> dict[str, Any]:
+    """Samples x joints outside the limits, and the worst joint.
+
+    One definition: :func:`~qpretarget.analysis.measures.joint_limit_violations`.
+    """
+    qi = robot.joint_q_index
+    viol, amount = joint_limit_violations(
+        q[:, qi], robot.q_min[qi], robot.q_max[qi], tolerance=JOINT_LIMIT_TOLERANCE
+    )
+    out: dict[str, Any] = {"joint_limit_violations": int(viol.sum())}
+    if viol.any():
+        out["worst_joint"] = robot.joint_names[int(np.argmax(np.max(amount, axis=0)))]
+    return out
+
+
+def _feet_drift_mm(robot: Any, traj: RobotTrajectory, q: np.ndarray) -> dict[str, float]:
+    """Largest displacement of each sole within one of its contact intervals [mm].
+
+    The horizontal and vertical parts are :func:`~qpretarget.analysis.measures.support_displacement`
+    (evaluate's foot slip and lift); the drift is their norm.
+    """
+    if traj.contacts is None or not np.asarray(traj.contacts).size:
+        return {}
+    model, data = robot.model, robot.model.createData()
+    contacts = np.asarray(traj.contacts, bool)
+    ids = [robot.frame_id(robot.feet[f].frame) if f in robot.feet else robot.frame_id(f)
+           for f in traj.foot_names]  # fmt: skip
+    soles = np.empty((len(q), len(ids), 3))
+    for k in range(len(q)):
+        pin.framesForwardKinematics(model, data, q[k])
+        for i, fid in enumerate(ids):
+            soles[k, i] = data.oMf[fid].translation
+    drift = {}
+    for i, name in enumerate(traj.foot_names):
+        h, v = support_displacement(soles[:, i], contacts[:, i])
+        d = np.hypot(h, v)
+        drift[name] = float(np.nanmax(d)) * 1e3 if np.isfinite(d).any() else 0.0
+    return drift
 
 
 def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
