@@ -90,3 +90,17 @@ def check_output_file(path: str | Path, suffix: str) -> Path:
                 raise OutputPathError(f"cannot write {str(p)!r}: {str(anc)!r} is not writable.")
             break
     return p
+
+
+def load_npz(path: str | Path, error: type[Exception]) -> Any:
+    """``numpy.load`` of an ``.npz`` file without pickles; ``error`` names the file if unreadable.
+
+    Returns:
+        The open ``NpzFile`` (a context manager).
+    """
+    import numpy as np
+
+    try:
+        return np.load(path, allow_pickle=False)
+    except Exception as exc:  # noqa: BLE001 - any failure to read is the same user error
+        raise error(f"{path}: not a readable .npz file ({exc}).") from None

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from .errors import QPRetargetError
+from .fileio import load_npz
 from .yamlio import load_yaml
 
 FORMAT = "qpretarget.run/1"
@@ -129,11 +130,7 @@ class RobotTrajectory:
         path = Path(path)
         if not path.is_file():
             raise TrajectoryFormatError(f"run file {str(path)!r} does not exist.")
-        try:
-            data = np.load(path, allow_pickle=False)
-        except Exception as exc:
-            raise TrajectoryFormatError(f"{path}: not a readable .npz file ({exc}).") from None
-        with data:
+        with load_npz(path, TrajectoryFormatError) as data:
             keys = set(data.files)
             for k in ("t", "q", "v", "joint_names", "robot", "config_yaml"):
                 if k not in keys:

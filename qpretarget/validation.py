@@ -51,3 +51,10 @@ def check_keys(
                 f"{listed}: {', '.join(names)}.",
                 path=f"{path}.{key}",
             )
+
+
+def check_bool(value: Any, name: str) -> bool:
+    """Return ``value`` if it is a YAML boolean, else raise :class:`ConfigError` naming ``name``."""
+    if not isinstance(value, bool):
+        raise ConfigError(f"{name} must be true or false, got {value!r}.")
+    return value

@@ -31,6 +31,7 @@ from typing import Any, Literal, overload
 import numpy as np
 
 from ..errors import ConfigError, QPRetargetError, missing_dependency
+from ..fileio import load_npz
 
 
 class CloudFormatError(QPRetargetError, ValueError):
@@ -516,11 +517,7 @@ def read_cloud_sequence(
 
 def _read_npz(path: Path, rate, intrinsics, camera_pose, depth_scale) -> CloudSequence:  # noqa: ANN001
     src = str(path)
-    try:
-        data = np.load(path, allow_pickle=False)
-    except Exception as exc:
-        raise CloudFormatError(f"{src}: not a readable .npz file ({exc}).") from None
-    with data:
+    with load_npz(path, CloudFormatError) as data:
         keys = set(data.files)
         if "rate" in keys and rate is None:
             rate = float(data["rate"])

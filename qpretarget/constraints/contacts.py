@@ -42,7 +42,7 @@ import pinocchio as pin
 from ..errors import ConfigError, UnknownNameError
 from ..robot import RobotModel, RobotState
 from ..robots import FootDescription
-from ..validation import positive_float
+from ..validation import check_bool, positive_float
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -110,9 +110,7 @@ class Contacts(Constraint):
         name: str | None = None,
     ) -> None:
         super().__init__(name)
-        if not isinstance(second_order, bool):
-            raise ConfigError(f"second_order must be true or false, got {second_order!r}.")
-        self.second_order = second_order
+        self.second_order = check_bool(second_order, "second_order")
         if (
             isinstance(max_correction, str)
             or not isinstance(max_correction, Sequence)

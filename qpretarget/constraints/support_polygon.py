@@ -39,7 +39,7 @@ import pinocchio as pin
 from ..errors import ConfigError
 from ..geometry2d import convex_hull_2d  # noqa: F401 (re-exported)
 from ..robot import RobotModel, RobotState
-from ..validation import positive_float
+from ..validation import check_bool, positive_float
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
 from .contacts import Contacts, velocity_kinematics
 
@@ -114,9 +114,7 @@ class SupportPolygon(Constraint):
         name: str | None = None,
     ) -> None:
         super().__init__(name)
-        if not isinstance(second_order, bool):
-            raise ConfigError(f"second_order must be true or false, got {second_order!r}.")
-        self.second_order = second_order
+        self.second_order = check_bool(second_order, "second_order")
         self.recovery_depth = positive_float(recovery_depth, "recovery_depth [m]", allow_zero=True)
         self.margin = positive_float(margin, "margin [m]", allow_zero=True)
         self.gain = positive_float(gain, "gain")

@@ -8,6 +8,7 @@ Tasks and constraints never call a solver; a strategy decides how their blocks b
 from __future__ import annotations
 
 import abc
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -139,6 +140,24 @@ class Strategy(abc.ABC):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
+
+
+def stack_weighted(
+    blocks: Sequence[CostBlock], ids: Iterable[int], J: np.ndarray, r: np.ndarray
+) -> None:
+    r"""Rows :math:`\sqrt{w_i} J_i` and :math:`\sqrt{w_i} v^*_i` of the blocks ``ids``, stacked.
+
+    Written into ``J`` (m, nv) and ``r`` (m,) in the order of ``ids`` (Dariush 2009 eq. 9 rows of
+    the weighted least-squares cost).
+    """
+    i = 0
+    for bi in ids:
+        b = blocks[bi]
+        m = b.J.shape[0]
+        sw = np.sqrt(b.weight)
+        np.multiply(b.J, sw[:, None], out=J[i : i + m])
+        np.multiply(b.v_star, sw, out=r[i : i + m])
+        i += m
 
 
 def solution_to_result(sol: QPSolution) -> StrategyResult:

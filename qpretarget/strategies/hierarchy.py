@@ -65,7 +65,7 @@ from ..problem import QPProblem
 from ..robot import RobotModel
 from ..solvers.base import QPSolver
 from ..validation import positive_float
-from .base import STRATEGIES, Strategy, StrategyResult, TaskDims, TickProblem
+from .base import STRATEGIES, Strategy, StrategyResult, TaskDims, TickProblem, stack_weighted
 
 
 def level_dampings(
@@ -191,14 +191,7 @@ class Hierarchy(Strategy):
         """
         lv = self._levels[k]
         Jw, rw, p, Hv = lv.Jw, lv.rw, lv.problem, lv.Hv
-        i = 0
-        for bi in lv.block_ids:
-            b = tp.blocks[bi]
-            m = b.J.shape[0]
-            sw = np.sqrt(b.weight)
-            np.multiply(b.J, sw[:, None], out=Jw[i : i + m])
-            np.multiply(b.v_star, sw, out=rw[i : i + m])
-            i += m
+        stack_weighted(tp.blocks, lv.block_ids, Jw, rw)
         np.matmul(Jw.T, Jw, out=Hv)
         lam = tp.damping if self.dampings is None else self.dampings[k]
         if lam > 0:

@@ -69,7 +69,7 @@ from scipy.linalg import solve_triangular
 from ..errors import ConfigError, close_matches_hint
 from ..robot import RobotModel
 from ..validation import positive_float
-from .base import STRATEGIES, Strategy, StrategyResult, TaskDims, TickProblem
+from .base import STRATEGIES, Strategy, StrategyResult, TaskDims, TickProblem, stack_weighted
 from .hierarchy import level_dampings
 
 VARIANTS = ("dariush", "poubel")
@@ -320,14 +320,7 @@ class NullSpace(ClosedFormStrategy):
     ) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray | None]:
         """Stack the tick's weighted Jacobians and velocities per level, and the null-space term."""
         for g, J, v in zip(self._groups, self._J, self._v, strict=True):
-            i = 0
-            for bi in g:
-                b = tp.blocks[bi]
-                m = b.J.shape[0]
-                sw = np.sqrt(b.weight)
-                np.multiply(b.J, sw[:, None], out=J[i : i + m])
-                np.multiply(b.v_star, sw, out=v[i : i + m])
-                i += m
+            stack_weighted(tp.blocks, g, J, v)
         z = None
         if self._opt_ids or self.centering_gain:
             z = np.zeros(self.nv)
