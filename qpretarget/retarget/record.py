@@ -35,6 +35,8 @@ class RunRecorder:
         self.actual: dict[str, list[np.ndarray]] = {n: [] for n in self.pos_tasks}
         self.scaled: dict[str, list[np.ndarray]] = {}
         self.extra: dict[str, list[Any]] = {}
+        #: Constraint name -> ticks on which it gave (``StepResult.relaxed``), for the summary.
+        self.relaxed_by: dict[str, int] = {}
 
     def __len__(self) -> int:
         """Ticks recorded."""
@@ -56,6 +58,8 @@ class RunRecorder:
         r["support"].append(support)
         if res.messages:
             r["messages"].extend(res.messages)
+        for name in res.relaxed:
+            self.relaxed_by[name] = self.relaxed_by.get(name, 0) + 1
         if self.contacts is not None:
             active = set(self.contacts.active_feet)
             r["contacts"].append([n in active for n in self.contacts.names])
@@ -100,7 +104,7 @@ class RunRecorder:
             tau=tau,
             human=human,
             extra=extra,
-            meta=meta,
+            meta={**meta, "relaxed_by": dict(sorted(self.relaxed_by.items()))},
         )
 
 

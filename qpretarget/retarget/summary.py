@@ -53,6 +53,9 @@ def summarize_run(
     out["feet_drift_mm"] = _feet_drift_mm(robot, traj, q)
     statuses, counts = np.unique(np.asarray(traj.status, dtype=str), return_counts=True)
     out["status"] = {str(s): int(c) for s, c in zip(statuses, counts, strict=True)}
+    relaxed_by = traj.meta.get("relaxed_by")
+    if relaxed_by:  # what gave on the relaxed ticks (StepResult.relaxed), ticks per constraint
+        out["relaxed_by"] = {str(k): int(v) for k, v in dict(relaxed_by).items()}
     support = traj.extra.get("support_state")
     if support is not None and len(support) and str(support[0]):
         changes = [0] + [k for k in range(1, T) if support[k] != support[k - 1]]
@@ -156,6 +159,9 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
         lines += [f"{'self-collision' if i == 0 else '':12s} {x}" for i, x in enumerate(audit)]
     st = summary.get("status", {})
     lines.append("ticks        " + ", ".join(f"{k} {v}" for k, v in st.items()))
+    if summary.get("relaxed_by"):
+        gave = ", ".join(f"{k} {v}" for k, v in summary["relaxed_by"].items())
+        lines.append(f"relaxed      ticks on which a constraint gave: {gave}")
     phases = summary.get("support_states")
     if phases:
         # Static mode: the lower_<side> sequences; kinematic mode: feet entering "landing"
