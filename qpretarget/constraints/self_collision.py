@@ -38,7 +38,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..collision import GEOMETRIES, CollisionModel, LinkShape, adjacent_links, link_shapes
-from ..collision.pairs import select_pairs
+from ..collision.pairs import Pair, select_pairs
 from ..errors import ConfigError, UnknownNameError
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
@@ -615,14 +615,10 @@ class SelfCollision(DistanceDamper):
         self._setup_rows(robot)
 
     def _listed_pairs(
-        self,
-        robot: RobotModel,
-        shapes: dict[str, LinkShape],
-        exclude: set[frozenset[str]],
-        p: str,
-    ) -> list[tuple[str, str]]:
+        self, robot: RobotModel, shapes: dict[str, LinkShape], exclude: set[frozenset[str]], p: str
+    ) -> list[Pair]:
         """The pairs of an explicit list, resolved to links, minus the excluded ones."""
-        pairs: list[tuple[str, str]] = []
+        pairs: list[Pair] = []
         seen: set[frozenset[str]] = set()
         for k, pair in enumerate(self._pairs_spec):
             a, b = (
@@ -708,12 +704,8 @@ class SelfCollision(DistanceDamper):
         return super().distances_and_gradients(state)
 
     def _auto_pairs(
-        self,
-        robot: RobotModel,
-        shapes: dict[str, LinkShape],
-        exclude: set[frozenset[str]],
-        p: str,
-    ) -> list[tuple[str, str]]:
+        self, robot: RobotModel, shapes: dict[str, LinkShape], exclude: set[frozenset[str]], p: str
+    ) -> list[Pair]:
         """``pairs: auto``: :func:`~qpretarget.collision.pairs.select_pairs` (one definition).
 
         Every pair of the candidate links minus same-joint, adjacent, SRDF-disabled, excluded

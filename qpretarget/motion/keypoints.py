@@ -38,43 +38,23 @@ from .human_motion import MotionError
 if TYPE_CHECKING:
     from .human_motion import HumanMotion
 
+
+def _sides(*parts: str) -> tuple[str, ...]:
+    """``left_<part>``, ``right_<part>`` of each part, in order."""
+    return tuple(f"{side}_{part}" for part in parts for side in ("left", "right"))
+
+
 #: Standard key-point names. Maps may define others; names one edit away from these are rejected
 #: as probable typos.
 KEYPOINT_NAMES: tuple[str, ...] = (
     "waist",
     "neck",
     "head",
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-    "left_hand",
-    "right_hand",
-    "left_hip",
-    "right_hip",
-    "left_knee",
-    "right_knee",
-    "left_ankle",
-    "right_ankle",
-    "left_toe",
-    "right_toe",
-    "left_heel",
-    "right_heel",
+    *_sides("shoulder", "elbow", "wrist", "hand", "hip", "knee", "ankle", "toe", "heel"),
 )
 
 #: The eight upper-body key-points of Dariush 2009 Fig. 2.
-DARIUSH_KEYPOINTS: tuple[str, ...] = (
-    "waist",
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-    "head",
-)
+DARIUSH_KEYPOINTS: tuple[str, ...] = ("waist", *_sides("shoulder", "elbow", "wrist"), "head")
 
 KEYPOINT_MAP_DIR = Path(__file__).resolve().parent / "keypoint_maps"
 

@@ -35,19 +35,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from ..motion.phases import SIDES, min_jerk
-
-_OTHER = {"left": "right", "right": "left"}
+from ..motion.phases import _OTHER, SIDES, _positive, min_jerk
 
 #: Foot states.
 FOOT_STATES = ("stance", "swing", "landing")
-
-
-def _positive(value: float, name: str) -> float:
-    x = float(value)
-    if not (math.isfinite(x) and x > 0):
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
-    return x
 
 
 #: A stance foot pivots only while the other foot's target is lower than this [m]: not under a

@@ -44,6 +44,7 @@ Decoded frames name each segment after the joint at its origin in MVN's own BVH 
 
 from __future__ import annotations
 
+import re
 import struct
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -361,21 +362,17 @@ def matrix_to_quat(R: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ clip -> segments
-#: Where each segment's origin comes from on a clip with key-points: a key-point, or a point
-#: ``a + s (b - a)`` between two key-points (the spine and the collar bones, which key-point maps
-#: do not carry).
+#: Where each segment's origin comes from on a clip with key-points: the key-point named like
+#: the segment's joint (``RightElbow`` -> ``right_elbow``), but for the pelvis (``waist``), and the
+#: spine and the collar bones, which key-point maps do not carry: a point ``a + s (b - a)``
+#: between two key-points ``(a, b, s)``.
 _SEGMENT_POINTS: dict[str, str | tuple[str, str, float]] = {
-    "Pelvis": "waist", "L5": ("waist", "neck", 0.2), "L3": ("waist", "neck", 0.4),
-    "T12": ("waist", "neck", 0.6), "T8": ("waist", "neck", 0.8), "Neck": "neck", "Head": "head",
-    "RightShoulder": ("neck", "right_shoulder", 0.25), "RightUpperArm": "right_shoulder",
-    "RightForeArm": "right_elbow", "RightHand": "right_wrist",
-    "LeftShoulder": ("neck", "left_shoulder", 0.25), "LeftUpperArm": "left_shoulder",
-    "LeftForeArm": "left_elbow", "LeftHand": "left_wrist",
-    "RightUpperLeg": "right_hip", "RightLowerLeg": "right_knee", "RightFoot": "right_ankle",
-    "RightToe": "right_toe",
-    "LeftUpperLeg": "left_hip", "LeftLowerLeg": "left_knee", "LeftFoot": "left_ankle",
-    "LeftToe": "left_toe",
-}  # fmt: skip
+    **{s: re.sub(r"(?<=[a-z])([A-Z])", r"_\1", SEGMENT_JOINTS[s]).lower() for s in SEGMENTS},
+    "Pelvis": "waist",
+    **{s: ("waist", "neck", f) for s, f in (("L5", 0.2), ("L3", 0.4), ("T12", 0.6), ("T8", 0.8))},
+    "RightShoulder": ("neck", "right_shoulder", 0.25),
+    "LeftShoulder": ("neck", "left_shoulder", 0.25),
+}
 
 #: Which orientation of the clip each segment takes (``waist``/``torso``/``head`` of the key-point
 #: map's ``orientations``), or ``None``: the rotation of the joint giving its key-point.

@@ -38,12 +38,12 @@ from ..constraints.self_collision import SelfCollision
 from ..errors import ConfigError
 from ..robot import RobotModel, RobotState
 from ..validation import positive_float
-from .base import REGULARIZATIONS, Regularization
-from .wln import PAPER_ALPHA, PAPER_BETA, PAPER_DAMPING, PAPER_RHO, JointLimitGradient
+from .base import REGULARIZATIONS
+from .wln import PAPER_ALPHA, PAPER_BETA, PAPER_DAMPING, PAPER_RHO, JointLimitWeighting
 
 
 @REGULARIZATIONS.register("crac")
-class CracRegularization(Regularization):
+class CracRegularization(JointLimitWeighting):
     r"""CRAC adaptive weight :math:`W = W_K + W_D` (CRAC eq. 17-29).
 
     Args:
@@ -71,7 +71,7 @@ class CracRegularization(Regularization):
         min_distance: float = 1e-6,
         min_pair_distance: float = 1e-3,
     ) -> None:
-        super().__init__(damping)
+        super().__init__(damping, max_weight=max_weight, min_distance=min_distance)
         self.rho = positive_float(rho, "rho")
         self.alpha = positive_float(alpha, "alpha [1/m]", allow_zero=True)
         self.beta = positive_float(beta, "beta", allow_zero=True)
@@ -81,14 +81,10 @@ class CracRegularization(Regularization):
             )
         self.inertia = inertia
         self.collisions = bool(collisions)
-        self.max_weight = positive_float(max_weight, "max_weight")
-        self.min_distance = positive_float(min_distance, "min_distance [rad]")
         self.min_pair_distance = positive_float(min_pair_distance, "min_pair_distance [m]")
 
     def bind(self, robot: RobotModel, constraints: Sequence[Constraint] = ()) -> None:
         super().bind(robot, constraints)
-        self._jl = JointLimitGradient(robot, self.min_distance)
-        self._W = np.eye(robot.nv)
         self._wk = np.zeros(robot.nv)
         self._data = robot.model.createData()  # CRBA runs on its own data: state.data stays intact
         self._pairs: list[SelfCollision] = []

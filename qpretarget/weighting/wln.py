@@ -69,13 +69,12 @@ class JointLimitGradient:
         return grad * v[self.vi] >= 0.0
 
 
-@REGULARIZATIONS.register("wln")
-class WeightedLeastNorm(Regularization):
-    r"""Chan-Dubey weighted least norm (Dariush 2009 eq. 13-14): :math:`w_i = 1 + |\nabla h_i|`.
+class JointLimitWeighting(Regularization):
+    r"""A metric weighted by the joint-limit gradient :math:`\nabla h` (``wln`` and ``crac``).
 
     Args:
         damping: :math:`\lambda`.
-        max_weight: cap on each :math:`w_i` (keeps the QP well conditioned at a limit).
+        max_weight: cap on each diagonal weight (keeps the QP well conditioned at a limit).
         min_distance: distance to a limit below which :math:`\nabla h` stops growing [rad].
     """
 
@@ -87,9 +86,24 @@ class WeightedLeastNorm(Regularization):
         self.min_distance = positive_float(min_distance, "min_distance [rad]")
 
     def bind(self, robot: RobotModel, constraints: Sequence[Constraint] = ()) -> None:
+        r"""Build :math:`\nabla h` of ``robot`` and the (nv, nv) buffer of :math:`W`."""
         super().bind(robot, constraints)
         self._jl = JointLimitGradient(robot, self.min_distance)
         self._W = np.eye(robot.nv)
+
+
+@REGULARIZATIONS.register("wln")
+class WeightedLeastNorm(JointLimitWeighting):
+    r"""Chan-Dubey weighted least norm (Dariush 2009 eq. 13-14): :math:`w_i = 1 + |\nabla h_i|`.
+
+    Args:
+        damping: :math:`\lambda`.
+        max_weight: cap on each :math:`w_i` (keeps the QP well conditioned at a limit).
+        min_distance: distance to a limit below which :math:`\nabla h` stops growing [rad].
+    """
+
+    def bind(self, robot: RobotModel, constraints: Sequence[Constraint] = ()) -> None:
+        super().bind(robot, constraints)
         self._diag = np.ones(robot.nv)
 
     def weights(self, state: RobotState) -> np.ndarray:
