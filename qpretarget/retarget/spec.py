@@ -57,6 +57,24 @@ def _check_keys(spec: Mapping[str, Any], allowed: Sequence[str], path: str) -> N
     check_keys(spec, allowed, path)
 
 
+def _check_known(
+    name: Any, known: Sequence[str], what: str, listing: str | None, path: str
+) -> None:
+    """Raise ``"<what> <name>." + close names (+ "<listing>: <known>.")`` if ``name`` is unknown."""
+    if name not in known:
+        names = f" {listing}: {', '.join(known)}." if listing else ""
+        raise ConfigError(
+            f"{what} {name!r}.{close_matches_hint(str(name), list(known))}{names}", path=path
+        )
+
+
+def _the_one(candidates: list[str], message: str, path: str) -> str:
+    """The only candidate; a ConfigError ``message`` when there are none or several."""
+    if len(candidates) != 1:
+        raise ConfigError(message, path=path)
+    return candidates[0]
+
+
 def _number(value: Any, path: str, *, positive: bool = True, integer: bool = False) -> float:
     ok = isinstance(value, (int, float)) and not isinstance(value, bool)
     if ok:
@@ -173,13 +191,7 @@ class RetargetSpec:
         tasks: dict[str, TaskBinding] = {}
         for name, entry in raw_tasks.items():
             tpath = f"{path}.tasks.{name}"
-            if name not in controller.tasks:
-                raise ConfigError(
-                    f"no controller task named {name!r}."
-                    f"{close_matches_hint(str(name), list(controller.tasks))} "
-                    f"Tasks: {', '.join(controller.tasks)}.",
-                    path=tpath,
-                )
+            _check_known(name, list(controller.tasks), "no controller task named", "Tasks", tpath)
             if isinstance(entry, str):
                 entry = {"keypoint": entry}
             entry = _mapping(entry, tpath, "{keypoint, orientation, offset}")
@@ -193,13 +205,9 @@ class RetargetSpec:
                         f"keypoint must be a key-point name, got {keypoint!r}.",
                         path=f"{tpath}.keypoint",
                     )
-                if keypoint not in KEYPOINT_NAMES:
-                    raise ConfigError(
-                        f"unknown key-point {keypoint!r}."
-                        f"{close_matches_hint(keypoint, KEYPOINT_NAMES)} "
-                        f"Key-points: {', '.join(KEYPOINT_NAMES)}.",
-                        path=f"{tpath}.keypoint",
-                    )
+                _check_known(
+                    keypoint, KEYPOINT_NAMES, "unknown key-point", "Key-points", f"{tpath}.keypoint"
+                )
                 if not getattr(task, "has_position", False):
                     raise ConfigError(
                         f"task {name!r} has no position to track ({task!r}); give it "
@@ -347,20 +355,13 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
         _check_keys(entry, ("contact", "task"), fpath)
         contact = entry.get("contact")
         if contact is None:
-            guesses = [n for n in contacts.names if side in n.lower()]
-            if len(guesses) != 1:
-                raise ConfigError(
-                    f"cannot tell which contact is the {side} foot among {contacts.names}; "
-                    f"give `contact:`.",
-                    path=fpath,
-                )
-            contact = guesses[0]
-        if contact not in contacts.names:
-            raise ConfigError(
-                f"no contact {contact!r}.{close_matches_hint(str(contact), contacts.names)} "
-                f"Contacts: {', '.join(contacts.names)}.",
-                path=f"{fpath}.contact",
+            contact = _the_one(
+                [n for n in contacts.names if side in n.lower()],
+                f"cannot tell which contact is the {side} foot among {contacts.names}; "
+                f"give `contact:`.",
+                fpath,
             )
+        _check_known(contact, contacts.names, "no contact", "Contacts", f"{fpath}.contact")
         frame_id = contacts.frame_ids[contacts.names.index(contact)]
         task = entry.get("task")
         if task is None:
@@ -371,20 +372,16 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
                 and _same_body(robot, t.frame_id, frame_id)
                 and t.has_position
             ]
-            if len(same) != 1:
-                raise ConfigError(
-                    f"no single frame task on the {side} foot ({contact!r}) to move it while it "
-                    f"swings (found {same}); add one, e.g. `- {{type: frame, name: {side}_foot, "
-                    f"frame: {robot.model.frames[frame_id].name}, mode: pose}}`, or give `task:`.",
-                    path=fpath,
-                )
-            task = same[0]
-        if task not in controller.tasks:
-            raise ConfigError(
-                f"no controller task named {task!r}."
-                f"{close_matches_hint(str(task), list(controller.tasks))}",
-                path=f"{fpath}.task",
+            task = _the_one(
+                same,
+                f"no single frame task on the {side} foot ({contact!r}) to move it while it "
+                f"swings (found {same}); add one, e.g. `- {{type: frame, name: {side}_foot, "
+                f"frame: {robot.model.frames[frame_id].name}, mode: pose}}`, or give `task:`.",
+                fpath,
             )
+        _check_known(
+            task, list(controller.tasks), "no controller task named", None, f"{fpath}.task"
+        )
         t = controller.tasks[task]
         if (
             not isinstance(t, FrameTask)
