@@ -31,6 +31,8 @@ HELP = """examples:
 
 Sources: xsens[:PORT] (Xsens MVN network streamer, MXTP02 over UDP), file:CLIP (BVH, AMC, C3D).
 Ctrl-C stops cleanly; --record writes the run (commands, latencies, frames) to an .npz file.
+Memory: without --record and --run it stays flat over hours; --run keeps about 8 kB per capture
+frame (3.6 GB per hour at 120 Hz), --record about 0.3 MB per second, until the run stops.
 Command datagram layouts, the status line and the latency figures: docs/live.md.
 """
 
@@ -94,7 +96,8 @@ def _add_output_arguments(p: argparse.ArgumentParser) -> None:
         "--run",
         default=None,
         metavar="RUN.npz",
-        help="also write the retargeter's run file (docs/formats.md) for evaluate / view",
+        help="also write the retargeter's run file (docs/formats.md) for evaluate / view "
+        "(kept in memory until the run stops: about 8 kB per capture frame)",
     )
 
 
@@ -190,7 +193,9 @@ def run(args: argparse.Namespace) -> int:
     controller = Controller.from_yaml(args.config)
     retargeter = Retargeter(controller, keypoint_map=args.keypoint_map, rate=args.rate)
     publishers, viewer = _publishers(args, controller)
-    session = _session(args, retargeter, source, publishers, record is not None)
+    session = _session(
+        args, retargeter, source, publishers, record is not None, record_run=run_file is not None
+    )
     if args.realtime is not None:
         set_realtime(args.realtime)
     report = _run_session(args, session, source, publishers)
@@ -222,9 +227,18 @@ def _publishers(args: argparse.Namespace, controller: Any) -> tuple[list, Any]:
 
 
 def _session(
-    args: argparse.Namespace, retargeter: Any, source: Any, publishers: list, record: bool
+    args: argparse.Namespace,
+    retargeter: Any,
+    source: Any,
+    publishers: list,
+    record: bool,
+    *,
+    record_run: bool = False,
 ) -> Any:
-    """The :class:`~qpretarget.sources.LiveSession` with the loop options (ms -> s)."""
+    """The :class:`~qpretarget.sources.LiveSession` with the loop options (ms -> s).
+
+    The retargeter records its run only for ``--run`` (else its memory stays flat).
+    """
     from ..sources import LiveSession
 
     return LiveSession(
@@ -236,6 +250,7 @@ def _session(
         resume_time=args.resume_time,
         max_lag=1e-3 * args.max_lag,
         record=record,
+        record_run=record_run,
         keypoint_map=args.keypoint_map,
     )
 

@@ -124,6 +124,7 @@ class Retargeter:
             raise ConfigError(f"rate must be above 1 Hz, got {self.rate!r}.", path="retarget.rate")
         self._setup_robot()
         self._stream: KeypointStream | None = None
+        self._record = True
 
     def __repr__(self) -> str:
         """Tasks, scaling, filter, rate."""
@@ -200,6 +201,7 @@ class Retargeter:
                     f"filtering (needs more than {pad}); use causal=True or a longer excerpt"
                 )
         t_out, y, raw = stream.offline(motion)
+        self._record = True
         self._begin(stream, float(motion.t[0]))
         self._human_raw_t: Any = motion.t.copy()
         self._human_raw: dict[str, Any] = dict(raw)
@@ -232,6 +234,7 @@ class Retargeter:
         *,
         rate: float | None = None,
         keypoint_map: Any = None,
+        record: bool = True,
     ) -> None:
         """Start an online stream (resets the controller).
 
@@ -240,6 +243,10 @@ class Retargeter:
                 orientation availability are used), or the list of joint names.
             rate: Capture rate [Hz] (default: the motion's).
             keypoint_map: Overrides the retargeter's key-point map.
+            record: Keep every tick and pushed frame for :meth:`trajectory` (about 8 kB per
+                capture frame on G1). ``False`` keeps only the state the next tick needs, so
+                memory stays flat over hours of teleoperation; the commands are the same, but
+                :meth:`trajectory` then raises.
 
         Raises:
             ValueError: No rate for a list of names.
@@ -262,6 +269,7 @@ class Retargeter:
         if keypoint_map is not None:
             self.keypoint_map = keypoint_map
         stream = self._make_stream(skeleton, causal=True)
+        self._record = bool(record)
         self._begin(stream, None)
         self._human_raw_t = []
         self._human_raw = {k: [] for k in stream.kmap.keypoints}
@@ -298,9 +306,10 @@ class Retargeter:
         if orientations is not None:
             rot_arr = self._frame_array(orientations, stream, what="orientations", shape=(3, 3))
         outputs, pts = stream.push(float(t), frame_arr, rot_arr)
-        self._human_raw_t.append(float(t))
-        for k, v in pts.items():
-            self._human_raw[k].append(np.asarray(v, float).copy())
+        if self._record:
+            self._human_raw_t.append(float(t))
+            for k, v in pts.items():
+                self._human_raw[k].append(np.asarray(v, float).copy())
         return [c for to, y in outputs for c in self._tick(float(to), y)]
 
     def finish(self) -> list[Command]:
@@ -569,7 +578,13 @@ class Retargeter:
 
         # 5. One control tick.
         res = ctrl.step(targets, dt=self.dt)
-        self._rec.add(t, res, phase, support_state, scaled)
+        if self._record:
+            self._rec.add(t, res, phase, support_state, scaled)
+        else:
+            # Not recording: the support log keeps only its last entry (the state in force).
+            log = self.sequencer or self.stepper
+            if log is not None and len(log.log) > 1:
+                del log.log[:-1]
         return Command(t, res.q, res.v, res.status, res, phase, support_state)
 
     def _scale(
@@ -660,8 +675,15 @@ class Retargeter:
         """The run so far as a :class:`~qpretarget.trajectory.RobotTrajectory`.
 
         Raises:
-            RetargetError: Nothing was retargeted yet.
+            RetargetError: Nothing was retargeted yet, or the stream was started with
+                ``record=False``.
         """
+        if self._stream is not None and not self._record:
+            raise RetargetError(
+                "the stream was started without recording (start(..., record=False)): there is "
+                "no run to return. Start it with record=True (the default) to get trajectory(); "
+                "on the command line, pass --run RUN.npz to `qpretarget live` to write the run file"
+            )
         rec = self._rec if self._stream is not None else None
         if rec is None or not len(rec):
             raise RetargetError("no control tick yet: retarget a motion or push frames first")

@@ -127,6 +127,29 @@ def test_live_on_a_file_source_runs_and_writes_the_record(
     np.testing.assert_array_equal(traj.q, run["q"])
 
 
+def test_live_records_the_retargeter_only_for_run(
+    tmp_path: Path, configs_dir: Path, mocap_dir: Path, monkeypatch
+) -> None:
+    """Without --run the retargeter is started with record=False (memory flat over hours);
+    --record alone still writes the live record (it keeps its own, not the retargeter's)."""
+    from qpretarget.retarget import Retargeter
+
+    seen: list[bool] = []
+    start = Retargeter.start
+
+    def spy(self, *args, **kwargs):
+        seen.append(kwargs.get("record", True))
+        return start(self, *args, **kwargs)
+
+    monkeypatch.setattr(Retargeter, "start", spy)
+    out = tmp_path / "live.npz"
+    code = main(["live", str(configs_dir / "g1_whole_body.yaml"), "--source",
+                 f"file:{mocap_dir / 'cmu_17_10_boxing.bvh'}", "--speed", "4", "--duration",
+                 "0.3", "--record", str(out), "--quiet"])  # fmt: skip
+    assert code == 0 and seen == [False]
+    assert len(np.load(out)["q"]) > 5
+
+
 def test_command_errors_are_one_line(tmp_path: Path, configs_dir: Path, capsys) -> None:
     cfg = str(configs_dir / "g1_whole_body.yaml")
     for argv, msg in [

@@ -53,8 +53,9 @@ class Recorder:
     def __init__(self) -> None:
         self.pushed: list[tuple[float, np.ndarray, np.ndarray]] = []
 
-    def start(self, skeleton: Any, keypoint_map: Any = None) -> None:
+    def start(self, skeleton: Any, keypoint_map: Any = None, record: bool = True) -> None:
         self.skeleton = skeleton
+        self.record = record
 
     def push(self, pos: np.ndarray, t: float, *, orientations: np.ndarray) -> list[Any]:
         self.pushed.append((t, np.array(pos), np.array(orientations)))
@@ -245,3 +246,15 @@ def test_a_stalled_loop_does_not_replay_every_missed_hold() -> None:
     assert len(rec.pushed) <= 12 and s.counts["skipped"] >= 190
     times = np.array([p[0] for p in rec.pushed])
     np.testing.assert_array_equal(times, np.arange(len(times)) / RATE)
+
+
+@pytest.mark.parametrize("record_run", [True, False])
+def test_the_retargeter_records_only_when_asked(record_run: bool) -> None:
+    """``record_run`` is what the retargeter is started with (``--run``); ``record`` (``--record``)
+    is the session's own record and does not need the retargeter's."""
+    rec = Recorder()
+    s = LiveSession(rec, FakeSource(), record=True, record_run=record_run, clock=lambda: 0.0)
+    s.feed([frame(0, 0.0), frame(1, P)])
+    s.advance(P)
+    assert rec.record is record_run
+    assert len(s.arrays()["frame_t"]) == 2
