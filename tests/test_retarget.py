@@ -140,10 +140,11 @@ def test_reaching_clip_end_to_end(request, config):
     assert max(s["feet_drift_mm"].values()) < 1.0
     assert traj.contacts.all()  # double support only: no step is taken
     assert set(traj.extra["human_phase"].tolist()) == {"double"}
-    # Pelvis: 13-16 mm with the former 20 self-collision pairs; with `pairs: auto` in
-    # g1_whole_body.yaml (issue 16) it lags 93 mm on this bend-and-scoop clip (hands 62-74 mm).
-    pelvis, hand = (50, 60) if config == "whole_body" else (100, 80)
-    assert s["rmse_mm"]["pelvis"] < pelvis and s["rmse_mm"]["left_hand"] < hand
+    # Pelvis: 13-16 mm with the former 20 self-collision pairs; with `pairs: auto` in both G1
+    # whole-body configs (issue 16) it lags about 90 mm on this bend-and-scoop clip (hands
+    # 62-74 mm): the person's hands pass where the robot's thighs and pelvis are, and the robot
+    # keeps them apart (docs/collisions.md, tracking cost).
+    assert s["rmse_mm"]["pelvis"] < 100 and s["rmse_mm"]["left_hand"] < 80
 
 
 def test_stepping_clip_end_to_end(whole_body):
