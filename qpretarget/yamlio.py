@@ -9,6 +9,8 @@ reads them as floats, as YAML 1.2 and every other YAML tool do.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
+from pathlib import Path
 from typing import IO, Any
 
 import yaml
@@ -41,4 +43,33 @@ def load_yaml(stream: str | bytes | IO[str]) -> Any:
     return yaml.load(stream, Loader=ConfigLoader)  # noqa: S506 - a SafeLoader subclass
 
 
-__all__ = ["ConfigLoader", "load_yaml"]
+def read_yaml_file(path: Path, error: Callable[[str], Exception], what: str) -> tuple[str, Any]:
+    """The text of the YAML file ``path`` and its content (:func:`load_yaml`).
+
+    Args:
+        path: the file.
+        error: the error type to raise, called with the message.
+        what: what the file is, for the message of a missing file (``"config file"``).
+
+    Raises:
+        error: the file is missing, cannot be read, is not UTF-8 text, or is not valid YAML
+            (syntax errors name the line and column).
+    """
+    if not path.is_file():
+        raise error(f"{what} {str(path)!r} does not exist.")
+    try:
+        text = path.read_text(encoding="utf-8")
+        return text, load_yaml(text)
+    except yaml.MarkedYAMLError as exc:  # syntax errors: where and what
+        mark = exc.problem_mark
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise error(f"{path}: invalid YAML{where}: {exc.problem or exc}") from None
+    except yaml.YAMLError as exc:
+        raise error(f"{path}: invalid YAML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start}).") from None
+    except (IsADirectoryError, PermissionError) as exc:
+        raise error(f"{path}: cannot be read ({exc.strerror}).") from None
+
+
+__all__ = ["ConfigLoader", "load_yaml", "read_yaml_file"]

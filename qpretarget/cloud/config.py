@@ -25,7 +25,7 @@ from typing import Any
 import yaml
 
 from ..errors import ConfigError, close_matches_hint
-from ..yamlio import load_yaml
+from ..yamlio import read_yaml_file
 
 
 @dataclass
@@ -352,17 +352,7 @@ class CloudConfig:
             ConfigError: missing file, YAML syntax error (with line) or invalid content.
         """
         path = Path(path)
-        if not path.is_file():
-            raise ConfigError(f"config file {str(path)!r} does not exist.")
-        text = path.read_text(encoding="utf-8")
-        try:
-            spec = load_yaml(text)
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-            raise ConfigError(
-                f"{path}: invalid YAML{where}: {getattr(exc, 'problem', exc)}"
-            ) from None
+        text, spec = read_yaml_file(path, ConfigError, "config file")
         if spec is not None and not isinstance(spec, Mapping):
             raise ConfigError(f"{path}: the file must hold a mapping (robot:, em:, ...).")
         try:

@@ -42,7 +42,7 @@ from ..strategies import STRATEGIES, Strategy, TickProblem
 from ..strategies.base import SoftRows
 from ..tasks import TASKS, Task
 from ..weighting.base import REGULARIZATIONS, Regularization
-from ..yamlio import load_yaml
+from ..yamlio import read_yaml_file
 from .acceleration import PAPER_DAMPING, AccelerationLevel
 from .levels import Level, LevelOutcome
 from .relaxation import Fallback, make_fallback
@@ -253,23 +253,7 @@ class Controller:
             ConfigError: on a missing file, YAML syntax errors (with line) or invalid content.
         """
         path = Path(path)
-        if not path.is_file():
-            raise ConfigError(f"config file {str(path)!r} does not exist.")
-        try:
-            with open(path, encoding="utf-8") as f:
-                cfg = load_yaml(f)
-        except yaml.MarkedYAMLError as exc:  # syntax errors: where and what
-            mark = exc.problem_mark
-            where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-            raise ConfigError(f"{path}: invalid YAML{where}: {exc.problem or exc}") from None
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path}: invalid YAML: {exc}") from None
-        except UnicodeDecodeError as exc:
-            raise ConfigError(
-                f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})."
-            ) from None
-        except (IsADirectoryError, PermissionError) as exc:
-            raise ConfigError(f"{path}: cannot be read ({exc.strerror}).") from None
+        text, cfg = read_yaml_file(path, ConfigError, "config file")
         if not isinstance(cfg, Mapping):
             raise ConfigError(f"{path}: the file must hold a mapping (robot:, tasks:, ...).")
         try:
@@ -277,7 +261,7 @@ class Controller:
         except ConfigError as exc:
             raise ConfigError(f"{path.name}: {exc}") from None
         ctrl.config_path = path
-        ctrl.config_text = path.read_text(encoding="utf-8")
+        ctrl.config_text = text
         return ctrl
 
     @property

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from ..yamlio import load_yaml
+from ..yamlio import read_yaml_file
 from .human_motion import MotionError
 
 if TYPE_CHECKING:
@@ -391,13 +391,7 @@ def load_keypoint_map(
                 f"no bundled key-point map {text_name!r}.{hint} Bundled maps: "
                 f"{', '.join(known)}; or pass the path of a YAML file (format in docs/motion.md)."
             )
-    if not path.is_file():
-        raise KeypointMapError(f"key-point map file {str(path)!r} does not exist")
-    text = path.read_text(encoding="utf-8")
-    try:
-        data = load_yaml(text)
-    except yaml.YAMLError as exc:
-        raise KeypointMapError(f"{path}: invalid YAML: {exc}") from None
+    text, data = read_yaml_file(path, KeypointMapError, "key-point map file")
     return KeypointMap.from_dict(data, name=path.stem, path=str(path), lines=_key_lines(text))
 
 
