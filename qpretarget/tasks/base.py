@@ -135,6 +135,14 @@ class Task(abc.ABC):
         """A :class:`TargetError` naming this task and ``tick`` (raised by :meth:`set_target`)."""
         return TargetError(message, task=self.name, tick=tick)
 
+    def target_array(self, target: Any, tick: int | None, expected: str) -> np.ndarray:
+        """``target`` as a float array (any shape).
+
+        Raises:
+            TargetError: ``"<expected>, got <type>."`` when ``target`` is not numbers.
+        """
+        return float_array(target, expected, task=self.name, tick=tick)
+
     def mark_missing(self) -> None:
         """The target of this tick is missing (NaN): weight zero, then a smooth ramp back."""
         self.presence = 0.0
@@ -224,6 +232,16 @@ class Task(abc.ABC):
         )
 
 
+def float_array(value: Any, expected: str, *, task: str, tick: int | None) -> np.ndarray:
+    """``value`` as a float array; a TargetError ``"<expected>, got <type>."`` if not numbers."""
+    try:
+        return np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise TargetError(
+            f"{expected}, got {type(value).__name__}.", task=task, tick=tick
+        ) from None
+
+
 def as_finite_array(
     value: Any, shape: tuple[int, ...], *, task: str, tick: int | None, what: str
 ) -> np.ndarray | None:
@@ -232,14 +250,7 @@ def as_finite_array(
     Raises:
         TargetError: when the shape or type is wrong.
     """
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise TargetError(
-            f"{what} must be an array of shape {shape}, got {type(value).__name__}.",
-            task=task,
-            tick=tick,
-        ) from None
+    arr = float_array(value, f"{what} must be an array of shape {shape}", task=task, tick=tick)
     if arr.shape != shape:
         raise TargetError(f"{what} must have shape {shape}, got {arr.shape}.", task=task, tick=tick)
     if not np.all(np.isfinite(arr)):

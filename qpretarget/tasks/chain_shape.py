@@ -330,14 +330,9 @@ class ChainShapeTask(Task):
         Raises:
             TargetError: on a wrong shape or type, or a source chain of zero length.
         """
-        try:
-            arr = np.array(target, dtype=float)
-        except (TypeError, ValueError):
-            raise self.target_error(
-                "target must be an (n, 3) array of source chain points, got "
-                f"{type(target).__name__}.",
-                tick,
-            ) from None
+        arr = self.target_array(
+            target, tick, "target must be an (n, 3) array of source chain points"
+        )
         if arr.ndim != 2 or arr.shape[0] < 2 or arr.shape[1] != 3:
             raise self.target_error(
                 f"target must be an (n, 3) array of n >= 2 source chain points (base first), "

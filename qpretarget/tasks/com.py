@@ -67,12 +67,7 @@ class ComTask(Task):
 
     def set_target(self, target: Any, *, tick: int | None = None) -> bool:
         """Set the CoM target: a 3-vector, or ``len(axes)`` values for the tracked axes."""
-        try:
-            arr = np.array(target, dtype=float)
-        except (TypeError, ValueError):
-            raise self.target_error(
-                f"CoM target must be numbers, got {type(target).__name__}.", tick
-            ) from None
+        arr = self.target_array(target, tick, "CoM target must be numbers")
         if arr.shape == (3,):
             full = arr
         elif arr.shape == (self.dim,):

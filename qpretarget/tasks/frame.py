@@ -157,14 +157,11 @@ class FrameTask(Task):
         if isinstance(target, pin.SE3):
             position, rotation = target.translation.copy(), target.rotation.copy()
         else:
-            try:
-                arr = np.array(target, dtype=float)
-            except (TypeError, ValueError):
-                raise self.target_error(
-                    f"target must be a 3-vector, 3x3 rotation, 4x4 transform or pinocchio.SE3, "
-                    f"got {type(target).__name__}.",
-                    tick,
-                ) from None
+            arr = self.target_array(
+                target,
+                tick,
+                "target must be a 3-vector, 3x3 rotation, 4x4 transform or pinocchio.SE3",
+            )
             if arr.shape == (3,):
                 position = arr
             elif arr.shape == (3, 3):

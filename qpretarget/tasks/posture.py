@@ -81,12 +81,9 @@ class PostureTask(Task):
                     raise self.target_error(str(exc), tick) from None
                 q[robot.joint_q_index[j]] = float(value)
         else:
-            try:
-                arr = np.array(target, dtype=float)
-            except (TypeError, ValueError):
-                raise self.target_error(
-                    "posture target must be numbers or {joint: value}.", tick
-                ) from None
+            arr = self.target_array(
+                target, tick, "posture target must be numbers or {joint: value}"
+            )
             if arr.shape == (robot.nq,):
                 q = arr
             elif arr.shape == (len(robot.joint_names),):
