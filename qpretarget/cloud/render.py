@@ -22,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -611,12 +612,8 @@ def clip_cloud_sequence(
     rate: float = 30.0,
     start: float = 0.0,
     duration: float | None = None,
-    calibration_frames: int = 4,
-    distance: float = 2.8,
-    noise: float = 0.005,
-    outlier_fraction: float = 0.05,
-    seed: int = 0,
     downscale: int = 1,
+    **render: Any,
 ) -> tuple[SyntheticSequence, HumanPoser]:
     """The human model following a mocap clip, rendered at ``rate`` Hz (``make-cloud``).
 
@@ -624,7 +621,9 @@ def clip_cloud_sequence(
     taking the clip frame nearest to each tick of ``rate`` from ``start`` for ``duration``
     seconds (all of it when None), and renders it with :func:`human_clip_sequence` (calibration
     posture first, then ``calibration_frames`` frames moving into the clip), by default at the
-    full Kinect V2 resolution (about 9,000 points on the person at 2.8 m).
+    full Kinect V2 resolution (``downscale`` 1: about 9,000 points on the person at 2.8 m).
+    ``render`` holds the other options of :func:`human_clip_sequence` (``calibration_frames``,
+    ``distance``, ``noise``, ``outlier_fraction``, ``seed``...), with its defaults.
 
     Raises:
         ConfigError: a rate <= 0, a negative start, a duration <= 0, or a start past the clip's
@@ -652,17 +651,7 @@ def clip_cloud_sequence(
     idx = np.searchsorted(0.5 * (t[1:] + t[:-1]), ticks)  # the nearest clip frame
     kp = {k: v[idx] for k, v in keypoint_positions(motion).items()}
     ori = {k: v[idx] for k, v in keypoint_orientations(motion).items()}
-    return human_clip_sequence(
-        kp,
-        ori,
-        ticks - ticks[0],
-        calibration_frames=calibration_frames,
-        distance=distance,
-        noise=noise,
-        outlier_fraction=outlier_fraction,
-        seed=seed,
-        downscale=downscale,
-    )
+    return human_clip_sequence(kp, ori, ticks - ticks[0], downscale=downscale, **render)
 
 
 def _visible_joints(
