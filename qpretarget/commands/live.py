@@ -31,8 +31,9 @@ HELP = """examples:
 
 Sources: xsens[:PORT] (Xsens MVN network streamer, MXTP02 over UDP), file:CLIP (BVH, AMC, C3D).
 Ctrl-C stops cleanly; --record writes the run (commands, latencies, frames) to an .npz file.
-Memory: without --record and --run it stays flat over hours; --run keeps about 8 kB per capture
-frame (3.6 GB per hour at 120 Hz), --record about 0.3 MB per second, until the run stops.
+Memory: without --record and --run only the latency figures grow (16 B per tick, 6 MB per hour);
+--run keeps about 8 kB per capture frame (3.5 GB per hour at 120 Hz) and --record about 0.3 MB
+per second until the run stops.
 Command datagram layouts, the status line and the latency figures: docs/live.md.
 """
 

@@ -78,7 +78,7 @@ def test_memory_stays_flat_without_recording(boxing):
     """2000 frames pushed after a warm-up grow the traced memory by less than 100 kB.
 
     Tolerance: 50 B per frame, below the smallest per-frame leak worth having (one numpy array is
-    over 100 B with its header) and far below the 8.3 kB per frame kept when recording; the
+    over 100 B with its header) and far below the 8.2 kB per frame kept when recording; the
     remaining wobble (measured within +-15 kB over 6000 frames) is numpy's small-block cache and
     the solver's work buffers. A garbage collection before each reading removes cycles not yet
     collected.
