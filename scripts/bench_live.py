@@ -50,7 +50,7 @@ def bench(config: Path, solver: str | None, clip: Path, args: argparse.Namespace
     retargeter = Retargeter(ctrl, rate=args.rate)
     source = XsensSource(0, capture_rate=args.capture_rate)
     sink = UdpPublisher("udp://127.0.0.1:9")  # discard port: the cost of sending is measured
-    session = LiveSession(retargeter, source, publishers=[sink], record=False)
+    session = LiveSession(retargeter, source, publishers=[sink], record=False, record_run=False)
     proc: list[subprocess.Popen] = []
 
     def start_stream(src: object) -> None:
