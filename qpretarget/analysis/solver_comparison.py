@@ -218,15 +218,9 @@ def load_targets(motion: str | Path, *, seconds: float | None = None) -> Motion:
 
 def _mocap_motion(path: Path, seconds: float | None) -> Motion:
     """A mocap clip, retargeted for each solver by the config's ``retarget:`` section."""
-    try:
-        from ..motion import load_motion
-        from ..retarget.retargeter import Retargeter
-    except ImportError:
-        raise ComparisonError(
-            f"{path.name}: reading mocap needs the motion pipeline's retargeter "
-            "(qpretarget.retarget), which this installation does not have. Retarget the clip "
-            "to a run file first, or use 'scripted'."
-        ) from None
+    from ..motion import load_motion
+    from ..retarget.retargeter import Retargeter
+
     human = load_motion(path)
 
     def run(controller: Controller) -> RobotTrajectory:

@@ -53,10 +53,6 @@ def _mapping(value: Any, path: str, what: str) -> dict[str, Any]:
     return dict(value)
 
 
-def _check_keys(spec: Mapping[str, Any], allowed: Sequence[str], path: str) -> None:
-    check_keys(spec, allowed, path)
-
-
 def _check_known(
     name: Any, known: Sequence[str], what: str, listing: str | None, path: str
 ) -> None:
@@ -177,7 +173,7 @@ class RetargetSpec:
                 path=path,
             )
         spec = _mapping(spec, path, "the retarget section")
-        _check_keys(spec, RETARGET_KEYS, path)
+        check_keys(spec, RETARGET_KEYS, path)
         kwargs: dict[str, Any] = {}
 
         # Tasks.
@@ -195,7 +191,7 @@ class RetargetSpec:
             if isinstance(entry, str):
                 entry = {"keypoint": entry}
             entry = _mapping(entry, tpath, "{keypoint, orientation, offset}")
-            _check_keys(entry, ("keypoint", "orientation", "offset"), tpath)
+            check_keys(entry, ("keypoint", "orientation", "offset"), tpath)
             task = controller.tasks[name]
             keypoint = entry.get("keypoint")
             orientation = entry.get("orientation")
@@ -255,7 +251,7 @@ class RetargetSpec:
         if isinstance(scaling, str):
             scaling = {"type": scaling}
         scaling = _mapping(scaling, f"{path}.scaling", "{type, blend_time, leg_extension}")
-        _check_keys(scaling, ("type", "blend_time", "leg_extension"), f"{path}.scaling")
+        check_keys(scaling, ("type", "blend_time", "leg_extension"), f"{path}.scaling")
         method = scaling.get("type", "poubel")
         if method not in SCALING_METHODS:
             raise ConfigError(
@@ -282,7 +278,7 @@ class RetargetSpec:
             kwargs["cutoff_hz"] = None
         else:
             filt = _mapping(filt, f"{path}.filter", "{cutoff_hz, order, zero_phase}")
-            _check_keys(filt, ("cutoff_hz", "order", "zero_phase"), f"{path}.filter")
+            check_keys(filt, ("cutoff_hz", "order", "zero_phase"), f"{path}.filter")
             if "cutoff_hz" in filt:
                 kwargs["cutoff_hz"] = _number(filt["cutoff_hz"], f"{path}.filter.cutoff_hz")
             if "order" in filt:
@@ -297,11 +293,11 @@ class RetargetSpec:
                     )
                 kwargs["zero_phase"] = filt["zero_phase"]
         up = _mapping(spec.get("upsample"), f"{path}.upsample", "{tension}")
-        _check_keys(up, ("tension",), f"{path}.upsample")
+        check_keys(up, ("tension",), f"{path}.upsample")
         if "tension" in up:
             kwargs["tension"] = _number(up["tension"], f"{path}.upsample.tension", positive=False)
         cal = _mapping(spec.get("calibration"), f"{path}.calibration", "{frames, ramp_time}")
-        _check_keys(cal, ("frames", "ramp_time"), f"{path}.calibration")
+        check_keys(cal, ("frames", "ramp_time"), f"{path}.calibration")
         if "frames" in cal:
             kwargs["calibration_frames"] = int(
                 _number(cal["frames"], f"{path}.calibration.frames", integer=True)
@@ -327,7 +323,7 @@ def _is_numbers(x: Any) -> bool:
 
 def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
     raw = {} if raw is True else _mapping(raw, path, "{mode, feet, com_task, detection, ...}")
-    _check_keys(raw, ("mode", "feet", "com_task", "detection", "sequence", "stepping"), path)
+    check_keys(raw, ("mode", "feet", "com_task", "detection", "sequence", "stepping"), path)
     mode = raw.get("mode", "kinematic")
     if mode not in SUPPORT_MODES:
         raise ConfigError(
@@ -344,7 +340,7 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
         )
     robot = controller.robot
     feet_raw = _mapping(raw.get("feet"), f"{path}.feet", "side -> {contact, task}")
-    _check_keys(feet_raw, SIDES, f"{path}.feet")
+    check_keys(feet_raw, SIDES, f"{path}.feet")
     feet: dict[str, FootBinding] = {}
     for side in SIDES:
         fpath = f"{path}.feet.{side}"
@@ -352,7 +348,7 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
         if isinstance(entry, str):
             entry = {"contact": entry}
         entry = _mapping(entry, fpath, "{contact, task}")
-        _check_keys(entry, ("contact", "task"), fpath)
+        check_keys(entry, ("contact", "task"), fpath)
         contact = entry.get("contact")
         if contact is None:
             contact = _the_one(
@@ -411,9 +407,9 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
             f"{com_task!r} is not a CoM task of the controller.", path=f"{path}.com_task"
         )
     det = _mapping(raw.get("detection"), f"{path}.detection", "thresholds")
-    _check_keys(det, [f.name for f in fields(PhaseThresholds)], f"{path}.detection")
+    check_keys(det, [f.name for f in fields(PhaseThresholds)], f"{path}.detection")
     seq = _mapping(raw.get("sequence"), f"{path}.sequence", "sequence settings")
-    _check_keys(seq, [f.name for f in fields(SequencerSettings)], f"{path}.sequence")
+    check_keys(seq, [f.name for f in fields(SequencerSettings)], f"{path}.sequence")
     try:
         detection = PhaseThresholds(
             **{k: _number(v, f"{path}.detection.{k}", positive=False) for k, v in det.items()}
@@ -427,7 +423,7 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
     except ValueError as exc:
         raise ConfigError(str(exc), path=f"{path}.sequence") from None
     step = _mapping(raw.get("stepping"), f"{path}.stepping", "stepping settings")
-    _check_keys(step, [f.name for f in fields(StepSettings)], f"{path}.stepping")
+    check_keys(step, [f.name for f in fields(StepSettings)], f"{path}.stepping")
     try:
         step_args: dict[str, Any] = {
             k: v if k == "pivot" else _number(v, f"{path}.stepping.{k}") for k, v in step.items()
