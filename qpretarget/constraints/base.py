@@ -30,7 +30,7 @@ from __future__ import annotations
 import abc
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -143,6 +143,17 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
     def describe(self) -> list[str]:
         """Lines describing the module's settings, for ``qpretarget info`` and the viewer."""
         return []
+
+    def compile_bounds_into(self, tick: Any) -> bool:
+        """Register this module's box bounds with the compiled kernel (control/compiled.py).
+
+        ``False`` (the default): no compiled part; the controller then runs in Python.
+        """
+        return False
+
+    def compile_rows_into(self, tick: Any, row: int) -> bool:
+        """Register this module's rows (from stacked row ``row``) with the compiled kernel."""
+        return False
 
     def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
         """Called with the applied velocity once a tick is done (e.g. to remember it)."""

@@ -337,6 +337,19 @@ class Contacts(Constraint):
             e[i, 3:] = R @ pin.log3(R.T @ self._anchor_R[i])
         return e
 
+    def compile_rows_into(self, tick: Any, row: int) -> bool:
+        """The same rows (drift anticipation included), computed in the kernel.
+
+        The kernel reads the active set and the anchors from this object's arrays, which
+        :meth:`set_contacts` and :meth:`set_anchor` change in place.
+        """
+        tick.add_contacts(
+            row, list(self.frame_ids), -1.0 if self.gain is None else self.gain,
+            self.second_order, self.max_correction[0], self.max_correction[1], self._active,
+            self._anchor_p, self._anchor_R,
+        )  # fmt: skip
+        return True
+
     def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
         k = 1.0 / dt if self.gain is None else min(self.gain, 1.0 / dt)
         C, lo, hi = self._C, self._l, self._u

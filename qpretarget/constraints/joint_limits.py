@@ -10,7 +10,7 @@ back in.
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -52,6 +52,14 @@ class JointLimits(Constraint):
         self._lb = np.full(robot.nv, -np.inf)
         self._ub = np.full(robot.nv, np.inf)
 
+    def compile_bounds_into(self, tick: Any) -> bool:
+        """The same bounds, computed in the kernel."""
+        tick.add_joint_limits(
+            self.name, [int(i) for i in self._qi], [int(i) for i in self._vi],
+            np.ascontiguousarray(self._lo), np.ascontiguousarray(self._hi), self.gain,
+        )  # fmt: skip
+        return True
+
     def compute_bounds(self, state: RobotState, dt: float) -> tuple[np.ndarray, np.ndarray]:
         q = state.q[self._qi]
         k = self.gain / dt
@@ -84,6 +92,11 @@ class VelocityLimits(Constraint):
         super().bind(robot, path=path)
         self._ub = self.scale * robot.v_max.copy()
         self._lb = -self._ub
+
+    def compile_bounds_into(self, tick: Any) -> bool:
+        """Constant bounds, copied by the kernel."""
+        tick.add_const_bounds(self.name, self._lb, self._ub)
+        return True
 
     def compute_bounds(self, state: RobotState, dt: float) -> tuple[np.ndarray, np.ndarray]:
         return self._lb, self._ub

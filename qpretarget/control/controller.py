@@ -44,6 +44,7 @@ from ..tasks import TASKS, Task
 from ..weighting.base import REGULARIZATIONS, Regularization
 from ..yamlio import read_yaml_file
 from .acceleration import PAPER_DAMPING, AccelerationLevel
+from .compiled import CompiledTick
 from .levels import Level, LevelOutcome
 from .relaxation import Fallback, make_fallback
 from .result import StepResult, TaskErrors
@@ -149,6 +150,10 @@ class Controller:
             con.link(self.constraints)
         self.fallback: Fallback | None = make_fallback(self, cfg.get("fallback"))
         self.level_impl: Level = self._build_level()
+        #: The compiled tick (control/compiled.py), or ``None``: then :attr:`compiled_reason`
+        #: names the module (or the missing kernel) that keeps the tick in Python.
+        self.compiled: CompiledTick | None
+        self.compiled, self.compiled_reason = CompiledTick.compile(self)
         self.reset()
 
     def _build_tasks(self) -> dict[str, Task]:
@@ -403,6 +408,21 @@ class Controller:
         timings = self.last_timings
         perf = time.perf_counter
         t0 = perf()
+        ct = self.compiled
+        if ct is not None:
+            blocks, gave = ct.build(dt)  # compiled modules in one kernel call, then Python ones
+            t1 = perf()
+            timings["tasks"] = t1 - t0
+            bound_gave = self._merge_bounds(dt) if gave is None else gave
+            t2 = perf()
+            timings["bounds"] = t2 - t1
+            self._stack_rows(dt, only=ct.python_rows)
+            timings["regularization"] = 0.0
+            return TickProblem(
+                state, dt, blocks, self._C, self._l, self._u, self._lb, self._ub,
+                self.regularization.matrix(state, dt), self.regularization.damping, self.tick,
+                self._J_all, self._v_all, bound_gave, ct,
+            )  # fmt: skip
         blocks = [t.block(state, dt) for t in self.tasks.values()]
         t1 = perf()
         timings["tasks"] = t1 - t0
@@ -443,11 +463,20 @@ class Controller:
                 gave[con.name] = amount
         return gave
 
-    def _stack_rows(self, dt: float) -> None:
-        """Write every row constraint's block into ``self._C, self._l, self._u`` (YAML order)."""
+    def _stack_rows(self, dt: float, only: set[str] | None = None) -> None:
+        """Write every row constraint's block into ``self._C, self._l, self._u`` (YAML order).
+
+        Args:
+            dt: tick length [s].
+            only: names of the constraints to write (default: all; the compiled tick writes
+                the others).
+        """
         timings, perf = self.last_timings, time.perf_counter
         i = 0
         for con in self.row_constraints:
+            if only is not None and con.name not in only:
+                i += con.n_rows
+                continue
             tc = perf()
             blk = con.compute_rows(self.state, dt)
             timings[con.name] = perf() - tc

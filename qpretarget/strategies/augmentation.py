@@ -118,8 +118,14 @@ class Augmentation(Strategy):
         (Dariush 2009 4.3.1, CRAC eq. 10), and the soft rows' exact-penalty slacks when any
         soft row is in play.
         """
-        self._weighted_rows(tp)
         H = self._Hv if self._soft_idx.size else self._problem.H
+        if self._compiled_cost(tp, H):  # H and g in the kernel (control/compiled.py)
+            if not self._soft_idx.size:
+                p = self._problem
+                tp.compiled.copy_constraints(p.C, p.l, p.u, p.lb, p.ub)
+                return p
+            return self._with_slacks(tp, H, self._gv)
+        self._weighted_rows(tp)
         self._hessian(tp, H)
         if not self._soft_idx.size:
             p = self._problem
@@ -127,7 +133,35 @@ class Augmentation(Strategy):
             np.negative(p.g, out=p.g)
             p.set_constraints(tp.C, tp.l, tp.u, tp.lb, tp.ub)
             return p
-        return self._with_slacks(tp, H)
+        np.matmul(self._Jw.T, self._rw, out=self._gv)
+        np.negative(self._gv, out=self._gv)
+        return self._with_slacks(tp, H, self._gv)
+
+    def _compiled_cost(self, tp: TickProblem, H: np.ndarray) -> bool:
+        """:math:`H` and :math:`g` from the kernel when the tick was compiled (same cost).
+
+        Needs the stacked rows (``tp.J_all``) and the identity metric :math:`W = I`.
+        """
+        ct = tp.compiled
+        if ct is None or tp.J_all is None or not self._is_eye(tp.W):
+            return False
+        weights = [b.weight for b in tp.blocks]
+        if len(weights) != len(self._w_seen) or any(
+            w is not s for w, s in zip(weights, self._w_seen, strict=True)
+        ):
+            self._sw_all = np.sqrt(np.concatenate(weights))
+            self._w_seen = weights
+        g = self._gv if self._soft_idx.size else self._problem.g
+        ct.hessian(self._sw_all, tp.damping * tp.damping, H, g)
+        return True
+
+    def _is_eye(self, W: np.ndarray) -> bool:
+        """``W`` is the identity (tested once per read-only matrix)."""
+        if W is not self._W_seen:
+            # A read-only W cannot change in place: test once whether it is the identity.
+            self._W_seen = W
+            self._W_is_eye = not W.flags.writeable and np.array_equal(W, np.eye(len(W)))
+        return self._W_is_eye
 
     def _weighted_rows(self, tp: TickProblem) -> None:
         """Every task's rows times the square root of its weights, stacked in ``_Jw``, ``_rw``."""
@@ -170,16 +204,12 @@ class Augmentation(Strategy):
         lam2 = tp.damping * tp.damping
         if lam2 > 0:
             W = tp.W
-            if W is not self._W_seen:
-                # A read-only W cannot change in place: test once whether it is the identity.
-                self._W_seen = W
-                self._W_is_eye = not W.flags.writeable and np.array_equal(W, np.eye(len(W)))
-            if self._W_is_eye:
+            if self._is_eye(W):
                 H.flat[:: nv + 1] += lam2
             else:
                 H += lam2 * W
 
-    def _with_slacks(self, tp: TickProblem, H: np.ndarray) -> QPProblem:
+    def _with_slacks(self, tp: TickProblem, H: np.ndarray, g: np.ndarray) -> QPProblem:
         """The QP with one slack slot per soft row in play (a finite side), in row order.
 
         A slack keeps its slot (and the solver its hot start) while the set does not change.
@@ -200,8 +230,7 @@ class Augmentation(Strategy):
         p.C[:, :nv] = tp.C
         p.C[rows, slots] = np.where(up[play], -1.0, 1.0)  # relax the finite side (upper first)
         p.H[:nv, :nv] = H
-        np.matmul(self._Jw.T, self._rw, out=self._gv)
-        np.negative(self._gv, out=p.g[:nv])
+        p.g[:nv] = g
         p.g[nv:] = 0.0
         p.g[slots] = self._soft_w[play]
         p.ub[nv:] = 0.0  # unused slots are fixed at zero

@@ -54,6 +54,9 @@ class TickProblem:
     J_all: np.ndarray | None = None
     v_all: np.ndarray | None = None
     bound_gave: dict[str, float] = field(default_factory=dict)
+    #: The controller's :class:`~qpretarget.control.compiled.CompiledTick` when the kernel
+    #: built this tick (a strategy may then assemble its QP there too), else ``None``.
+    compiled: Any = None
 
 
 @dataclass(slots=True)

@@ -196,6 +196,19 @@ class Task(abc.ABC):
                 setattr(self, a, c)
         return (e - e_prev) / dt
 
+    def compile_into(self, tick: Any, row: int) -> bool:
+        """Register this task's per-tick computation with the compiled kernel (``tick``).
+
+        The kernel then writes the task's error, Jacobian and reference velocity at stacked row
+        ``row`` (control/compiled.py). Returns ``False`` (the default) when the task has no
+        compiled part; the controller then runs every task in Python.
+        """
+        return False
+
+    def _kernel_gain(self) -> float:
+        """The gain as the kernel takes it (``-1``: ``None``, a whole error per tick)."""
+        return -1.0 if self.gain is None else float(self.gain)
+
     def effective_gain(self, dt: float) -> float:
         """``K`` with ``K dt`` capped at 1."""
         k = 1.0 / dt if self.gain is None else self.gain

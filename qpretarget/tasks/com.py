@@ -84,6 +84,13 @@ class ComTask(Task):
         self.target = full
         return True
 
+    def compile_into(self, tick: Any, row: int) -> bool:
+        """Compiled CoM error and Jacobian rows (no feed-forward in the kernel)."""
+        if self.feedforward:
+            return False
+        tick.add_com_task(self, row, [int(r) for r in self.rows], self._kernel_gain())
+        return True
+
     def compute_error(self, state: RobotState) -> np.ndarray:
         return (self.target - state.com())[self.rows]
 

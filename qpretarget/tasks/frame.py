@@ -119,6 +119,17 @@ class FrameTask(Task):
             parts.append(self.orientation_weight)
         self.weight = self.weight * np.concatenate(parts)
 
+    def compile_into(self, tick: Any, row: int) -> bool:
+        """Compiled error and Jacobian (the same eq. 11 error; no feed-forward in the kernel)."""
+        if self.feedforward:
+            return False
+        off = np.zeros(3) if self.offset is None else np.ascontiguousarray(self.offset)
+        mode = {"position": 0, "orientation": 1, "pose": 2}[self.mode]
+        tick.add_frame_task(
+            self, row, self.frame_id, mode, off, self.offset is not None, self._kernel_gain()
+        )
+        return True
+
     # ------------------------------------------------------------------ state
     def current_pose(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         """World position of the tracked point and world rotation of the frame."""

@@ -99,6 +99,11 @@ class PostureTask(Task):
         self.q_target = q
         return True
 
+    def compile_into(self, tick: Any, row: int) -> bool:
+        """Compiled posture error ``q_target ⊖ q`` (joint rows) and its constant Jacobian."""
+        tick.add_posture_task(self, row, self.dim, self._root_nv, self._kernel_gain())
+        return True
+
     def compute_error(self, state: RobotState) -> np.ndarray:
         return pin.difference(state.model, state.q, self.q_target)[self._root_nv :]
 

@@ -1,0 +1,655 @@
+// SPDX-License-Identifier: Apache-2.0
+//
+// qpretarget._kernel: the compiled hot path of one velocity-level tick (issue 17).
+//
+// What each Python module computes per tick runs here, in one call and with no Python loop:
+//   * tasks (qpretarget/tasks/frame.py, com.py, posture.py): error e, Jacobian J and reference
+//     velocity v* = K e (Dariush 2009 eq. 9, CRAC eq. 15), written into the controller's stacked
+//     buffers; the orientation error is Dariush 2009 eq. 11 (CRAC eq. 12);
+//   * box bounds (constraints/joint_limits.py): gamma (q_min - q) / dt <= v <= gamma (q_max - q) / dt
+//     and |v| <= v_max, merged most important first exactly as Controller._merge_bounds does;
+//   * contact rows (constraints/contacts.py): J_f v = K e_f - dt/2 Jdot_f v (CRAC eq. 34-42 and
+//     the second-order drift anticipation documented there);
+//   * augmentation (strategies/augmentation.py, Dariush 2009 4.3.1): H = Jw' Jw + lambda^2 I,
+//     g = -Jw' rw with Jw = sqrt(w) J, rw = sqrt(w) v*;
+//   * the direct DAQP solve (solvers/daqp_.py): DAQP's C entry point, hot-started from the
+//     previous active set, with the same inputs as the Python backend.
+// The Python classes keep their configuration, validation and every rarely used path; the
+// controller uses this kernel only when every module of its config has a compiled part
+// (qpretarget/control/compiled.py), and the Python path otherwise.
+//
+// The pinocchio Model and Data are the Python objects' own (extracted through boost.python),
+// so the kernel and the Python modules share one kinematics pass.
+
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include <boost/python.hpp>
+
+#include <pinocchio/multibody.hpp>
+#include <pinocchio/algorithm/center-of-mass.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/spatial.hpp>
+
+#include <dlfcn.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace nb = nanobind;
+namespace bp = boost::python;
+using pinocchio::Data;
+using pinocchio::Model;
+
+using RowMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using MapRM = Eigen::Map<RowMat>;
+using MapV = Eigen::Map<Eigen::VectorXd>;
+using Mat6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
+using Arr = nb::ndarray<double, nb::c_contig, nb::device::cpu>;
+using IArr = nb::ndarray<int64_t, nb::c_contig, nb::device::cpu>;
+using BArr = nb::ndarray<bool, nb::c_contig, nb::device::cpu>;
+
+static const double INF = std::numeric_limits<double>::infinity();
+
+template <class T>
+static T *extract_ref(nb::handle h, const char *what) {
+  bp::object o{bp::handle<>(bp::borrowed(h.ptr()))};
+  bp::extract<T &> ex(o);
+  if (!ex.check()) throw nb::type_error((std::string("expected a ") + what).c_str());
+  return &ex();
+}
+
+// A float64 C-contiguous numpy array held by Python: pointer and size.
+struct Buf {
+  nb::object owner;
+  double *p = nullptr;
+  size_t n = 0;
+  Buf() = default;
+  explicit Buf(Arr a) : owner(nb::find(a)), p(a.data()), n(a.size()) {}
+};
+
+// Read a float64 array attribute of a Python object (a task's current target).
+static const double *attr_array(PyObject *obj, PyObject *name, size_t expect) {
+  PyObject *a = PyObject_GetAttr(obj, name);
+  if (!a) throw nb::python_error();
+  nb::object holder = nb::steal(a);
+  Arr arr = nb::cast<Arr>(holder);
+  if (arr.size() != expect) throw std::runtime_error("target of unexpected size");
+  // The task keeps the array alive (it is its attribute); the kernel reads it now.
+  return arr.data();
+}
+
+static double sq(double x) { return x * x; }
+
+// ---------------------------------------------------------------- tasks
+struct TaskK {
+  int row = 0, dim = 0;
+  int identity_col = -1;  // >= 0: the rows are [0 I] from this column on (posture)
+  double gain = -1.0;  // <= 0: None (K = 1/dt)
+  nb::object py;       // the Python task (targets are read from it every tick)
+  virtual ~TaskK() = default;
+  // Writes e (dim) and J (dim x nv) at row `row`.
+  virtual void compute(const Model &m, Data &d, const Eigen::VectorXd &q, MapRM &J, double *e) = 0;
+  double k(double dt) const { return (gain <= 0 || gain * dt > 1.0) ? 1.0 / dt : gain; }
+};
+
+struct FrameTaskK : TaskK {
+  int fid = 0, mode = 2;  // 0 position, 1 orientation, 2 pose
+  bool has_offset = false;
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+  PyObject *s_pos, *s_rot;
+  Mat6x J6;
+  FrameTaskK() {
+    s_pos = PyUnicode_InternFromString("position_target");
+    s_rot = PyUnicode_InternFromString("rotation_target");
+  }
+  void compute(const Model &m, Data &d, const Eigen::VectorXd &, MapRM &J, double *e) override {
+    const auto &M = d.oMf[fid];
+    const Eigen::Matrix3d &R = M.rotation();
+    J6.setZero(6, m.nv);
+    pinocchio::getFrameJacobian(m, d, fid, pinocchio::LOCAL_WORLD_ALIGNED, J6);
+    int r = row;
+    if (mode != 1) {
+      Eigen::Map<const Eigen::Vector3d> pt(attr_array(py.ptr(), s_pos, 3));
+      Eigen::Vector3d p = M.translation();
+      if (has_offset) {
+        Eigen::Vector3d ro = R * offset;
+        p += ro;
+        Eigen::Matrix3d S;
+        S << 0, -ro[2], ro[1], ro[2], 0, -ro[0], -ro[1], ro[0], 0;
+        J.block(r, 0, 3, m.nv) = J6.topRows<3>() - S * J6.bottomRows<3>();
+      } else {
+        J.block(r, 0, 3, m.nv) = J6.topRows<3>();
+      }
+      for (int i = 0; i < 3; ++i) e[i] = pt[i] - p[i];
+      r += 3;
+      e += 3;
+    }
+    if (mode != 0) {
+      // rotation_target is a row-major (3, 3) numpy array
+      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> Rt(attr_array(py.ptr(), s_rot, 9));
+      Eigen::Matrix3d A = Rt * R.transpose();
+      e[0] = 0.5 * (A(2, 1) - A(1, 2));
+      e[1] = 0.5 * (A(0, 2) - A(2, 0));
+      e[2] = 0.5 * (A(1, 0) - A(0, 1));
+      J.block(r, 0, 3, m.nv) = J6.bottomRows<3>();
+    }
+  }
+};
+
+struct ComTaskK : TaskK {
+  std::vector<int> rows;
+  PyObject *s_t;
+  ComTaskK() { s_t = PyUnicode_InternFromString("target"); }
+  void compute(const Model &m, Data &d, const Eigen::VectorXd &, MapRM &J, double *e) override {
+    const auto &Jc = pinocchio::jacobianCenterOfMass(m, d, true);
+    Eigen::Map<const Eigen::Vector3d> t(attr_array(py.ptr(), s_t, 3));
+    const Eigen::Vector3d &c = d.com[0];
+    for (size_t i = 0; i < rows.size(); ++i) {
+      e[i] = t[rows[i]] - c[rows[i]];
+      J.row(row + int(i)) = Jc.row(rows[i]);
+    }
+  }
+};
+
+struct PostureTaskK : TaskK {
+  int root_nv = 0;
+  PyObject *s_t;
+  Eigen::VectorXd diff;
+  PostureTaskK() { s_t = PyUnicode_InternFromString("q_target"); }
+  void compute(const Model &m, Data &, const Eigen::VectorXd &q, MapRM &J, double *e) override {
+    Eigen::Map<const Eigen::VectorXd> qt(attr_array(py.ptr(), s_t, m.nq), m.nq);
+    diff.resize(m.nv);
+    pinocchio::difference(m, q, qt, diff);
+    for (int i = 0; i < dim; ++i) e[i] = diff[root_nv + i];
+    J.block(row, 0, dim, m.nv).setZero();
+    for (int i = 0; i < dim; ++i) J(row + i, root_nv + i) = 1.0;
+  }
+};
+
+// ---------------------------------------------------------------- bounds
+struct BoundsK {
+  std::string name;
+  virtual ~BoundsK() = default;
+  virtual void compute(const Eigen::VectorXd &q, double dt, Eigen::VectorXd &lb, Eigen::VectorXd &ub) = 0;
+};
+
+struct JointLimitsK : BoundsK {
+  std::vector<int> qi, vi;
+  Eigen::VectorXd lo, hi;
+  double gain = 0.9;
+  void compute(const Eigen::VectorXd &q, double dt, Eigen::VectorXd &lb, Eigen::VectorXd &ub) override {
+    lb.setConstant(-INF);
+    ub.setConstant(INF);
+    double k = gain / dt;
+    for (size_t j = 0; j < qi.size(); ++j) {
+      double qj = q[qi[j]];
+      lb[vi[j]] = k * (lo[j] - qj);
+      ub[vi[j]] = k * (hi[j] - qj);
+    }
+  }
+};
+
+struct ConstBoundsK : BoundsK {
+  Eigen::VectorXd lo, hi;
+  void compute(const Eigen::VectorXd &, double, Eigen::VectorXd &lb, Eigen::VectorXd &ub) override {
+    lb = lo;
+    ub = hi;
+  }
+};
+
+// ---------------------------------------------------------------- contacts
+struct ContactsK {
+  int row = 0;
+  std::vector<int> fids;
+  double gain = -1.0;
+  bool second_order = true;
+  double cap_lin = 0.5, cap_ang = 2.0;
+  Buf active_b, anchor_p, anchor_R;  // the Python constraint's arrays (modified in place there)
+  bool *active = nullptr;
+  Mat6x J6;
+  void compute(const Model &m, Data &d, Data &vd, bool &vd_ready, const Eigen::VectorXd &q,
+               const Eigen::VectorXd &v, double dt, MapRM &C, double *l, double *u) {
+    double k = (gain <= 0) ? 1.0 / dt : std::min(gain, 1.0 / dt);
+    bool any = false;
+    for (size_t i = 0; i < fids.size(); ++i) any = any || active[i];
+    bool drift = second_order && any && !v.isZero(0.0);
+    if (drift && !vd_ready) {
+      pinocchio::forwardKinematics(m, vd, q, v, Eigen::VectorXd::Zero(m.nv));
+      vd_ready = true;
+    }
+    double half_dt = 0.5 * dt;
+    double cl2 = cap_lin * cap_lin, ca2 = cap_ang * cap_ang;
+    for (size_t i = 0; i < fids.size(); ++i) {
+      int r0 = row + 6 * int(i);
+      if (!active[i]) {
+        C.block(r0, 0, 6, m.nv).setZero();
+        for (int j = 0; j < 6; ++j) {
+          l[r0 + j] = -INF;
+          u[r0 + j] = INF;
+        }
+        continue;
+      }
+      int fid = fids[i];
+      const auto &M = d.oMf[fid];
+      const Eigen::Matrix3d &R = M.rotation();
+      J6.setZero(6, m.nv);
+      pinocchio::getFrameJacobian(m, d, fid, pinocchio::LOCAL_WORLD_ALIGNED, J6);
+      C.block(r0, 0, 6, m.nv) = J6;
+      Eigen::Map<const Eigen::Vector3d> pa(anchor_p.p + 3 * i);
+      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> Ra(anchor_R.p + 9 * i);
+      Eigen::Vector3d lin = k * (pa - M.translation());
+      Eigen::Matrix3d Rrel = R.transpose() * Ra;
+      Eigen::Vector3d ang = R * pinocchio::log3(Rrel);
+      ang *= k;
+      double n2 = lin.dot(lin);
+      if (n2 > cl2) lin *= cap_lin / std::sqrt(n2);
+      n2 = ang.dot(ang);
+      if (n2 > ca2) ang *= cap_ang / std::sqrt(n2);
+      for (int j = 0; j < 3; ++j) {
+        l[r0 + j] = lin[j];
+        l[r0 + 3 + j] = ang[j];
+      }
+      if (drift) {
+        auto acc = pinocchio::getFrameClassicalAcceleration(m, vd, fid, pinocchio::LOCAL_WORLD_ALIGNED);
+        Eigen::Matrix<double, 6, 1> a = acc.toVector();
+        a *= half_dt;
+        for (int j = 0; j < 6; ++j) l[r0 + j] -= a[j];
+      }
+      for (int j = 0; j < 6; ++j) u[r0 + j] = l[r0 + j];
+    }
+  }
+};
+
+// ---------------------------------------------------------------- DAQP (C API of the installed daqp)
+extern "C" {
+typedef struct {
+  int n, m, ms;
+  double *H, *f, *A, *bupper, *blower;
+  int *sense;
+  int *break_points;
+  int nh;
+  int problem_type;
+} KDAQPProblem;
+typedef struct {  // DAQP 0.11 DAQPSettings (include/types.h), field for field
+  double primal_tol, dual_tol, zero_tol, pivot_tol, progress_tol;
+  int cycle_tol, iter_limit;
+  double fval_bound, eps_prox, eta_prox, rho_soft, rel_subopt, abs_subopt, sing_tol, refactor_tol,
+      time_limit, w_soft;
+  int eq_reduction, presolve;
+  double pad[16];  // room should a later DAQP add fields (only the leading ones are written)
+} KDAQPSettings;
+typedef struct {
+  double *x, *lam;
+  double fval, soft_slack;
+  int exitflag, iter, nodes;
+  double solve_time, setup_time;
+  double pad[8];
+} KDAQPResult;
+typedef void (*quadprog_fn)(KDAQPResult *, KDAQPProblem *, KDAQPSettings *);
+typedef void (*default_settings_fn)(KDAQPSettings *);
+}
+
+struct Daqp {
+  quadprog_fn quadprog = nullptr;
+  default_settings_fn defaults = nullptr;
+  std::string error;
+  bool load(const std::string &path) {
+    void *h = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+    if (!h) {
+      error = dlerror();
+      return false;
+    }
+    quadprog = (quadprog_fn)dlsym(h, "daqp_quadprog");
+    defaults = (default_settings_fn)dlsym(h, "daqp_default_settings");
+    if (!quadprog || !defaults) {
+      error = "daqp_quadprog/daqp_default_settings not exported by " + path;
+      quadprog = nullptr;
+      return false;
+    }
+    return true;
+  }
+};
+static Daqp g_daqp;
+
+static bool daqp_load(const std::string &path) { return g_daqp.quadprog != nullptr || g_daqp.load(path); }
+static std::string daqp_error() { return g_daqp.error; }
+
+// Defaults as DAQP sets them (for the layout check in Python: these must be DAQP's documented
+// defaults, else the struct layout differs and the compiled solve is not used).
+static std::vector<double> daqp_defaults() {
+  KDAQPSettings s;
+  g_daqp.defaults(&s);
+  return {s.primal_tol, s.dual_tol, s.zero_tol, s.pivot_tol, s.progress_tol, double(s.cycle_tol),
+          double(s.iter_limit), s.fval_bound, s.eps_prox, s.eta_prox, s.rho_soft};
+}
+
+// One hot-started DAQP solve of  min 1/2 x'Hx + g'x  s.t. lb <= x <= ub, l <= C x <= u, the same
+// inputs as solvers/daqp_.py: rows with no finite side are left out; bounds clipped at 1e30; the
+// previous multipliers `lam` (n + n_in) mark the hot-start active set (sense 1), equal bounds are
+// equalities (sense 5). Returns (exitflag, iterations); x and lam (for the next hot start) are
+// written in place, lam zeroed when the solve failed with `lam_valid` false.
+struct DaqpWork {
+  std::vector<int> rows, sense;
+  std::vector<double> A, bu, bl, x, lamr;
+};
+
+static nb::tuple daqp_solve(Arr H, Arr g, Arr C, Arr l, Arr u, Arr lb, Arr ub, Arr x_out, Arr lam,
+                            bool warm, double primal_tol, double dual_tol, int iter_limit,
+                            double eps_prox) {
+  static DaqpWork w;
+  const double BIG = 1e30;
+  int n = int(g.size());
+  int nin = int(l.size());
+  const double *Cp = C.data(), *lp = l.data(), *up = u.data();
+  w.rows.clear();
+  for (int i = 0; i < nin; ++i)
+    if (std::isfinite(lp[i]) || std::isfinite(up[i])) w.rows.push_back(i);
+  int m = int(w.rows.size());
+  w.A.resize(size_t(m) * n);
+  for (int r = 0; r < m; ++r)
+    std::copy(Cp + size_t(w.rows[r]) * n, Cp + size_t(w.rows[r] + 1) * n, w.A.begin() + size_t(r) * n);
+  w.bu.resize(n + m);
+  w.bl.resize(n + m);
+  w.sense.assign(n + m, 0);
+  const double *lbp = lb.data(), *ubp = ub.data(), *lamp = lam.data();
+  for (int i = 0; i < n; ++i) {
+    w.bu[i] = std::min(ubp[i], BIG);
+    w.bl[i] = std::max(lbp[i], -BIG);
+  }
+  for (int r = 0; r < m; ++r) {
+    w.bu[n + r] = std::min(up[w.rows[r]], BIG);
+    w.bl[n + r] = std::max(lp[w.rows[r]], -BIG);
+  }
+  if (warm) {
+    for (int i = 0; i < n; ++i)
+      if (lamp[i] != 0.0) w.sense[i] = 1;
+    for (int r = 0; r < m; ++r)
+      if (lamp[n + w.rows[r]] != 0.0) w.sense[n + r] = 1;
+  }
+  for (int i = 0; i < n + m; ++i)
+    if (w.bl[i] == w.bu[i]) w.sense[i] = 5;
+  w.x.assign(n, 0.0);
+  w.lamr.assign(n + m, 0.0);
+  KDAQPProblem qp{n, n + m, n, H.data(), g.data(), w.A.data(), w.bu.data(), w.bl.data(),
+                  w.sense.data(), nullptr, 0, 0};
+  KDAQPSettings s;
+  g_daqp.defaults(&s);
+  s.primal_tol = primal_tol;
+  s.dual_tol = dual_tol;
+  s.iter_limit = iter_limit;
+  s.eps_prox = eps_prox;
+  KDAQPResult res;
+  res.x = w.x.data();
+  res.lam = w.lamr.data();
+  {
+    nb::gil_scoped_release release;
+    g_daqp.quadprog(&res, &qp, &s);
+  }
+  int flag = res.exitflag;
+  if (flag == -5 && eps_prox == 0.0) {  // singular H: proximal iterations (solvers/daqp_.py)
+    s.eps_prox = 1e-6;
+    g_daqp.quadprog(&res, &qp, &s);
+    flag = res.exitflag;
+  }
+  double *xo = x_out.data(), *lo = lam.data();
+  bool ok = (flag == 1 || flag == 2);
+  for (int i = 0; i < n && ok; ++i) ok = std::isfinite(w.x[i]);
+  if (ok) {
+    std::copy(w.x.begin(), w.x.end(), xo);
+    std::fill(lo, lo + n + nin, 0.0);
+    std::copy(w.lamr.begin(), w.lamr.begin() + n, lo);
+    for (int r = 0; r < m; ++r) lo[n + w.rows[r]] = w.lamr[n + r];
+  } else {
+    std::fill(lo, lo + n + nin, 0.0);  // no hot start from a failed solve
+  }
+  return nb::make_tuple(flag, res.iter, ok);
+}
+
+// ---------------------------------------------------------------- the tick
+struct Tick {
+  Model *model;
+  Data *data;
+  Data vdata;
+  nb::object keep_model, keep_data;
+  std::vector<std::unique_ptr<TaskK>> tasks;
+  std::vector<std::unique_ptr<BoundsK>> bounds;  // merge order (most important first)
+  std::vector<ContactsK> contacts;
+  Buf J_all, v_all, e_all, C, l, u, lb, ub;
+  int m_tasks = 0, n_rows = 0;
+  Eigen::VectorXd q, v, blo, bhi, nlb, nub;
+  std::vector<double> gave;
+  // augmentation
+  RowMat Jw;
+  Eigen::MatrixXd Hl;
+  Eigen::VectorXd rw;
+  std::vector<int> dense_rows;
+
+  Tick(nb::handle py_model, nb::handle py_data)
+      : model(extract_ref<Model>(py_model, "pinocchio.Model")),
+        data(extract_ref<Data>(py_data, "pinocchio.Data")),
+        vdata(*model),
+        keep_model(nb::borrow(py_model)),
+        keep_data(nb::borrow(py_data)) {}
+  Tick(const Tick &) = delete;
+  Tick &operator=(const Tick &) = delete;
+
+  void set_buffers(Arr J, Arr ve, Arr e, Arr C_, Arr l_, Arr u_, Arr lb_, Arr ub_) {
+    J_all = Buf(J);
+    v_all = Buf(ve);
+    e_all = Buf(e);
+    C = Buf(C_);
+    l = Buf(l_);
+    u = Buf(u_);
+    lb = Buf(lb_);
+    ub = Buf(ub_);
+    m_tasks = int(ve.size());
+    n_rows = int(l_.size());
+  }
+
+  void add_frame_task(nb::object py, int row, int fid, int mode, Arr offset, bool has_offset, double gain) {
+    auto t = std::make_unique<FrameTaskK>();
+    t->py = py;
+    t->row = row;
+    t->fid = fid;
+    t->mode = mode;
+    t->dim = mode == 2 ? 6 : 3;
+    t->has_offset = has_offset;
+    if (has_offset) t->offset = Eigen::Map<Eigen::Vector3d>(offset.data());
+    t->gain = gain;
+    tasks.push_back(std::move(t));
+  }
+  void add_com_task(nb::object py, int row, std::vector<int> rows, double gain) {
+    auto t = std::make_unique<ComTaskK>();
+    t->py = py;
+    t->row = row;
+    t->rows = rows;
+    t->dim = int(rows.size());
+    t->gain = gain;
+    tasks.push_back(std::move(t));
+  }
+  void add_posture_task(nb::object py, int row, int dim, int root_nv, double gain) {
+    auto t = std::make_unique<PostureTaskK>();
+    t->py = py;
+    t->row = row;
+    t->dim = dim;
+    t->root_nv = root_nv;
+    t->identity_col = root_nv;
+    t->gain = gain;
+    tasks.push_back(std::move(t));
+  }
+  void add_joint_limits(std::string name, std::vector<int> qi, std::vector<int> vi, Arr lo, Arr hi, double gain) {
+    auto b = std::make_unique<JointLimitsK>();
+    b->name = name;
+    b->qi = qi;
+    b->vi = vi;
+    b->lo = Eigen::Map<Eigen::VectorXd>(lo.data(), lo.size());
+    b->hi = Eigen::Map<Eigen::VectorXd>(hi.data(), hi.size());
+    b->gain = gain;
+    bounds.push_back(std::move(b));
+  }
+  void add_const_bounds(std::string name, Arr lo, Arr hi) {
+    auto b = std::make_unique<ConstBoundsK>();
+    b->name = name;
+    b->lo = Eigen::Map<Eigen::VectorXd>(lo.data(), lo.size());
+    b->hi = Eigen::Map<Eigen::VectorXd>(hi.data(), hi.size());
+    bounds.push_back(std::move(b));
+  }
+  void add_contacts(int row, std::vector<int> fids, double gain, bool second_order, double cap_lin,
+                    double cap_ang, BArr active, Arr anchor_p, Arr anchor_R) {
+    ContactsK c;
+    c.row = row;
+    c.fids = fids;
+    c.gain = gain;
+    c.second_order = second_order;
+    c.cap_lin = cap_lin;
+    c.cap_ang = cap_ang;
+    c.active_b.owner = nb::find(active);
+    c.active = active.data();
+    c.anchor_p = Buf(anchor_p);
+    c.anchor_R = Buf(anchor_R);
+    contacts.push_back(std::move(c));
+  }
+
+  // Tasks, bounds (merged) and rows of this tick. Returns the amounts each bound gave
+  // (NaN: nothing), one per bound module in merge order.
+  std::vector<double> build(Arr q_, Arr v_, double dt) {
+    const Model &m = *model;
+    Data &d = *data;
+    q = Eigen::Map<Eigen::VectorXd>(q_.data(), m.nq);
+    v = Eigen::Map<Eigen::VectorXd>(v_.data(), m.nv);
+    MapRM J(J_all.p, m_tasks, m.nv);
+    for (auto &t : tasks) {
+      double *e = e_all.p + t->row;
+      t->compute(m, d, q, J, e);
+      double k = t->k(dt);
+      for (int i = 0; i < t->dim; ++i) v_all.p[t->row + i] = e[i] * k;
+    }
+    // box bounds, most important first; a less important one gives (Controller._merge_bounds)
+    gave.assign(bounds.size(), std::numeric_limits<double>::quiet_NaN());
+    if (bounds.empty()) {  // the box is merged in Python (a module without a compiled part)
+      MapRM Cm(C.p, n_rows, m.nv);
+      bool vd_ready = false;
+      for (auto &c : contacts) c.compute(m, d, vdata, vd_ready, q, v, dt, Cm, l.p, u.p);
+      return gave;
+    }
+    MapV LB(lb.p, m.nv), UB(ub.p, m.nv);
+    LB.setConstant(-INF);
+    UB.setConstant(INF);
+    gave.assign(bounds.size(), std::numeric_limits<double>::quiet_NaN());
+    blo.resize(m.nv);
+    bhi.resize(m.nv);
+    for (size_t b = 0; b < bounds.size(); ++b) {
+      bounds[b]->compute(q, dt, blo, bhi);
+      if (b == 0) {
+        LB = blo;
+        UB = bhi;
+        continue;
+      }
+      double amount = -INF;
+      bool any = false;
+      for (int i = 0; i < m.nv; ++i) {
+        double nl = std::max(LB[i], blo[i]), nu = std::min(UB[i], bhi[i]);
+        if (nl > nu) {
+          any = true;
+          amount = std::max(amount, std::max(nl - UB[i], LB[i] - nu));
+          nl = std::min(std::max(blo[i], LB[i]), UB[i]);
+          nu = std::min(std::max(bhi[i], LB[i]), UB[i]);
+          nl = std::min(nl, nu);
+        }
+        LB[i] = nl;
+        UB[i] = nu;
+      }
+      if (any) gave[b] = amount;
+    }
+    MapRM Cm(C.p, n_rows, m.nv);
+    bool vd_ready = false;
+    for (auto &c : contacts) c.compute(m, d, vdata, vd_ready, q, v, dt, Cm, l.p, u.p);
+    return gave;
+  }
+
+  // Augmentation's cost (strategies/augmentation.py, Dariush 2009 4.3.1, CRAC eq. 10):
+  // H = Jw' Jw + lambda^2 I and g = -Jw' rw, Jw = diag(sw) J, rw = sw .* v*, over every stacked
+  // task row (compiled or not). Rows of [0 I] form (posture) add their weights to the diagonal
+  // instead of going through the dense product.
+  void hessian(Arr sw_, double lambda2, Arr H_, Arr g_) {
+    int nv = model->nv;
+    const double *swp = sw_.data();
+    MapRM J(J_all.p, m_tasks, nv);
+    MapRM H(H_.data(), nv, nv);
+    MapV g(g_.data(), nv);
+    dense_rows.clear();
+    std::vector<char> ident(m_tasks, 0);
+    for (auto &t : tasks)
+      if (t->identity_col >= 0)
+        for (int i = 0; i < t->dim; ++i) ident[t->row + i] = 1;
+    for (int r = 0; r < m_tasks; ++r)
+      if (!ident[r]) dense_rows.push_back(r);
+    int md = int(dense_rows.size());
+    Jw.resize(md, nv);
+    rw.resize(md);
+    for (int i = 0; i < md; ++i) {
+      int r = dense_rows[i];
+      Jw.row(i) = swp[r] * J.row(r);
+      rw[i] = swp[r] * v_all.p[r];
+    }
+    Hl.setZero(nv, nv);
+    Hl.selfadjointView<Eigen::Lower>().rankUpdate(Jw.transpose());
+    H = Hl.selfadjointView<Eigen::Lower>();
+    g.noalias() = -(Jw.transpose() * rw);
+    for (auto &t : tasks) {
+      if (t->identity_col < 0) continue;
+      for (int i = 0; i < t->dim; ++i) {
+        int r = t->row + i, c = t->identity_col + i;
+        double w = swp[r] * swp[r];
+        H(c, c) += w;
+        g[c] -= w * v_all.p[r];
+      }
+    }
+    if (lambda2 > 0) H.diagonal().array() += lambda2;
+  }
+
+  // Copies of this tick's rows and box into a QP's buffers.
+  void copy_constraints(Arr C_, Arr l_, Arr u_, Arr lb_, Arr ub_) {
+    int nv = model->nv;
+    if (n_rows) {
+      std::copy(C.p, C.p + size_t(n_rows) * nv, C_.data());
+      std::copy(l.p, l.p + n_rows, l_.data());
+      std::copy(u.p, u.p + n_rows, u_.data());
+    }
+    std::copy(lb.p, lb.p + nv, lb_.data());
+    std::copy(ub.p, ub.p + nv, ub_.data());
+  }
+
+  size_t n_tasks() const { return tasks.size(); }
+};
+
+NB_MODULE(_kernel, m) {
+  m.doc() = "qpretarget's compiled per-tick kernel (tasks, bounds, contact rows, augmentation, DAQP)";
+  m.attr("PINOCCHIO_VERSION") = PINOCCHIO_VERSION;
+  m.def("daqp_load", &daqp_load, "Load DAQP's C entry points from its installed extension module.");
+  m.def("daqp_error", &daqp_error);
+  m.def("daqp_defaults", &daqp_defaults);
+  m.def("daqp_solve", &daqp_solve);
+  nb::class_<Tick>(m, "Tick")
+      .def(nb::init<nb::handle, nb::handle>())
+      .def("set_buffers", &Tick::set_buffers)
+      .def("add_frame_task", &Tick::add_frame_task)
+      .def("add_com_task", &Tick::add_com_task)
+      .def("add_posture_task", &Tick::add_posture_task)
+      .def("add_joint_limits", &Tick::add_joint_limits)
+      .def("add_const_bounds", &Tick::add_const_bounds)
+      .def("add_contacts", &Tick::add_contacts)
+      .def("build", &Tick::build)
+      .def("hessian", &Tick::hessian)
+      .def("copy_constraints", &Tick::copy_constraints)
+      .def_prop_ro("n_tasks", &Tick::n_tasks);
+}
