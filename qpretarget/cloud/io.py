@@ -268,9 +268,17 @@ def estimate_normals(points: np.ndarray, viewpoint: np.ndarray | None, k: int = 
         return np.tile([0.0, 0.0, 1.0], (n, 1))
     k = int(min(k, n))
     _, idx = cKDTree(points).query(points, k=k)
-    X = points[idx]
-    nb = X - X.mean(axis=1, keepdims=True)
-    nrm = smallest_eigenvectors(np.matmul(nb.transpose(0, 2, 1), nb))
+    # Scatter matrices entry by entry on (k, n) coordinate arrays, reduced along contiguous
+    # rows (a (n, k, 3) gather, batched 3x3 products and reductions over many short rows are
+    # slow in numpy).
+    idx_t = np.ascontiguousarray(idx.reshape(n, k).T)
+    cs = [np.take(np.ascontiguousarray(points[:, a]), idx_t) for a in range(3)]
+    cs = [c - c.mean(axis=0) for c in cs]
+    C = np.empty((n, 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            C[:, a, b] = C[:, b, a] = (cs[a] * cs[b]).sum(axis=0)
+    nrm = smallest_eigenvectors(C)
     ref = (viewpoint - points) if viewpoint is not None else (points - points.mean(axis=0))
     nrm[np.einsum("na,na->n", nrm, ref) < 0] *= -1
     return nrm

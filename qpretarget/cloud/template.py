@@ -198,6 +198,7 @@ class PosedTemplate:
     offsets: np.ndarray  # (M, 3) r_m = v_m - p_j (world axes), rigid part
     R: np.ndarray  # (njoints, 3, 3)
     p: np.ndarray  # (njoints, 3)
+    index: np.ndarray | None = None  # the template points posed (None: all of them, in order)
 
 
 def segments_of_joints(robot: RobotModel) -> tuple[np.ndarray, tuple[str, ...]]:
@@ -601,25 +602,58 @@ class Template:
         return float(self.scales[self._frame_seg[frame_id]])
 
     # ------------------------------------------------------------------ kinematics
-    def pose(self, q: np.ndarray, *, jacobians: bool = True) -> PosedTemplate:
-        """Forward kinematics (and joint Jacobians) of the HUMROB model: points and normals."""
+    def pose(
+        self,
+        q: np.ndarray,
+        *,
+        jacobians: bool = True,
+        index: np.ndarray | None = None,
+        normals: bool = True,
+    ) -> PosedTemplate:
+        """Forward kinematics (and joint Jacobians) of the HUMROB model: points and normals.
+
+        ``index`` (sorted point indices, rigid skinning only) poses those points alone, in
+        that order: a frame's fit uses only the points the sensor can see, which are the same
+        throughout the frame (:meth:`subset`). With ``normals=False`` (the position stages'
+        line searches) the normals are not computed: an empty (0, 3) array.
+        """
         model, data = self.model, self.data
         if jacobians:
             pin.computeJointJacobians(model, data, q)
         else:
             pin.forwardKinematics(model, data, q)
-        R = np.array([M.rotation for M in data.oMi])
-        p = np.array([M.translation for M in data.oMi])
-        G = np.take(R.reshape(len(R), 9).T, self.joint, axis=1)  # (9, M) rows contiguous
-        off = _rotate_rows(G, self.local)
-        pts = off + np.take(p, self.joint, axis=0)
-        nrm = _rotate_rows(G, self.normals0)
+        Hom = np.array([M.homogeneous for M in data.oMi])  # one pass over the joints
+        R = Hom[:, :3, :3]
+        p = Hom[:, :3, 3]
+        joint, local, normals0 = self.joint, self.local, self.normals0
+        if index is not None:
+            if len(self.blend):
+                raise ValueError("posing a subset of the points needs rigid skinning")
+            joint, local, normals0 = self.subset(index)
+        G = np.take(R.reshape(len(R), 9).T, joint, axis=1)  # (9, M) rows contiguous
+        off = _rotate_rows(G, local)
+        pts = off + np.take(p, joint, axis=0)
+        nrm = _rotate_rows(G, normals0) if normals else np.zeros((0, 3))
+        if index is not None:
+            return PosedTemplate(pts, nrm, off, R, p, index)
         if len(self.blend):
             w = self.blend_weight[:, None]
             i = self.blend_parent
             other = np.einsum("kab,kb->ka", R[i], self.blend_local) + p[i]
             pts[self.blend] = (1 - w) * pts[self.blend] + w * other
         return PosedTemplate(pts, nrm, off, R, p)
+
+    def subset(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Joints, local coordinates and normals of the points ``index`` (kept while both stay).
+
+        The gathers are cached: a frame poses the same subset 20-30 times, and the local
+        coordinates change only with :meth:`set_scales` (a new array each time).
+        """
+        c = getattr(self, "_subset_cache", None)
+        if c is None or c[0] is not index or c[1] is not self.local:
+            c = (index, self.local, self.joint[index], self.local[index], self.normals0[index])
+            self._subset_cache = c
+        return c[2], c[3], c[4]
 
     def joint_jacobians(self) -> np.ndarray:
         """(J, 6, nv) LOCAL_WORLD_ALIGNED Jacobians of :attr:`used_joints` (after :meth:`pose`)."""
@@ -652,17 +686,21 @@ class Template:
                 out[hit] = (1 - w) * out[hit] + w * Jpar
         return out
 
-    def _group_sums(self, W: np.ndarray) -> np.ndarray:
-        """(J, c) sums of the rows of ``W`` (M, c) over the points of each used joint."""
+    def _group_sums(self, W: np.ndarray, index: np.ndarray | None = None) -> np.ndarray:
+        """(J, c) sums of the rows of ``W`` (M, c) over the points of each used joint.
+
+        ``index``: the rows of ``W`` are the template points ``index`` (a posed subset).
+        """
         g = self._group
         cache = getattr(self, "_group_matrix", None)
-        if cache is None or cache[0] is not g:
+        if cache is None or cache[0] is not g or cache[1] is not index:
             from scipy.sparse import csr_matrix
 
-            M = len(g)
-            G = csr_matrix((np.ones(M), (g, np.arange(M))), shape=(len(self.used_joints), M))
-            cache = self._group_matrix = (g, G)
-        return np.asarray(cache[1] @ W)
+            gi = g if index is None else g[index]
+            M = len(gi)
+            G = csr_matrix((np.ones(M), (gi, np.arange(M))), shape=(len(self.used_joints), M))
+            cache = self._group_matrix = (g, index, G)
+        return np.asarray(cache[2] @ W)
 
     def normal_equations(
         self,
@@ -704,7 +742,7 @@ class Template:
             nJ = len(self.used_joints)
             r = posed.offsets
             # Per-joint sums of P, P r, P r r^T, e, r x e: one sparse product.
-            sums = self._group_sums(_moment_columns(P1, r, E))
+            sums = self._group_sums(_moment_columns(P1, r, E), posed.index)
             w0, c, rr = sums[:, 0], sums[:, 1:4], sums[:, 4:13].reshape(nJ, 3, 3)
             f, tau = sums[:, 13:16], sums[:, 16:19]
             K = np.zeros((nJ, 6, 6))
@@ -718,7 +756,7 @@ class Template:
         if normal_weight > 0 and P1n is not None and En is not None:
             nJ = len(self.used_joints)
             n = posed.normals
-            sums = self._group_sums(_moment_columns(P1n, n, En))
+            sums = self._group_sums(_moment_columns(P1n, n, En), posed.index)
             w0, nn, tau = sums[:, 0], sums[:, 4:13].reshape(nJ, 3, 3), sums[:, 16:19]
             Kn = w0[:, None, None] * np.eye(3) - nn
             Ja = J6[:, 3:]
@@ -801,7 +839,7 @@ class Template:
         """
         D = self.centre_jacobian_blocks(posed)
         W = _moment_columns(P1, posed.offsets, E)
-        sums = self._group_sums(W[:, [0, 1, 2, 3, 13, 14, 15]])
+        sums = self._group_sums(W[:, [0, 1, 2, 3, 13, 14, 15]], posed.index)
         w0, c, f = sums[:, 0], sums[:, 1:4], sums[:, 4:7]
         A = w0[:, None, None] * J6[:, :3] - np.matmul(skew_batch(c), J6[:, 3:])  # (J, 3, nv)
         H_qe = np.einsum("jan,jac->nc", A, D)
