@@ -138,6 +138,8 @@ class SupportPhaseDetector:
         self._pending: dict[str, float | None] = {"left": None, "right": None}
         self._low_since: dict[str, float | None] = {"left": None, "right": None}
         self.height = {"left": 0.0, "right": 0.0}
+        #: side -> height of each of the foot's points over its type's ground [m] (NaN unseen).
+        self.point_height: dict[str, list[float]] = {"left": [], "right": []}
         self.speed = {"left": 0.0, "right": 0.0}
 
     @property
@@ -173,6 +175,7 @@ class SupportPhaseDetector:
         th = self.thresholds
         first = self._t_prev is None
         for side, pts in feet.items():
+            self.point_height[side] = [p[2] - ground[i] for i, p in enumerate(pts)]
             heights = [
                 p[2] - ground[i] for i, p in enumerate(pts) if math.isfinite(p[2] - ground[i])
             ]

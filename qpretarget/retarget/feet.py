@@ -221,4 +221,54 @@ class FootTargets:
         return desired
 
 
-__all__ = ["FOOT_YAW_RANGE", "FootTargets"]
+#: Largest forward distance between the feet of the initial stance, in leg lengths.
+INITIAL_STRIDE = 0.8
+
+
+def initial_soles(
+    feet: FootSupport,
+    calibration: Calibration,
+    leg_scale: float,
+    leg_lengths: Mapping[str, float],
+    kp: Mapping[str, np.ndarray],
+    height_off: float,
+) -> dict[str, pin.SE3] | None:
+    r"""The soles of the person's first-sample stance (the run's initial posture).
+
+    With :math:`d = s\,R_a (a_l - a_r)` the person's ankle-to-ankle vector scaled by the
+    leg-length ratio :math:`s` and turned by the calibration heading :math:`R_a`, and
+    :math:`d_f` its part along the robot's reference heading: the soles keep their reference
+    height, flatness, yaw, stance width and mid-point, and are placed :math:`\pm d_f / 2`
+    forward (within :data:`INITIAL_STRIDE` of the leg length). The stance width stays the
+    robot's (its hips are not the person's; a wider or narrower start stance twisted the legs
+    at the first kicks), and so do the yaws (the feet's yaws are followed as changes from
+    calibration).
+
+    Returns ``None`` (the robot starts from its reference posture) when an ankle of the person
+    is missing in the sample, or when the person does not stand on both feet: the lowest foot
+    key-points (ankle, toe, heel) of the two feet differ by more than ``height_off`` (the
+    detector's lift height), a foot is up and the robot lifts it at once.
+    """
+    ankles = [kp.get(f"{side}_ankle") for side in SIDES]
+    if any(a is None or not np.all(np.isfinite(a)) for a in ankles):
+        return None
+    lows = []
+    for side in SIDES:
+        z = [float(kp[f"{side}_{p}"][2]) for p in ("ankle", "toe", "heel") if f"{side}_{p}" in kp]
+        lows.append(min((v for v in z if math.isfinite(v)), default=math.nan))
+    if not abs(lows[0] - lows[1]) <= height_off:
+        return None
+    psi = yaw_of(feet.sole_ref["left"].rotation[:, 0])
+    fwd_axis = np.array([math.cos(psi), math.sin(psi), 0.0])
+    d = leg_scale * (calibration.rotation @ (np.asarray(ankles[0]) - np.asarray(ankles[1])))
+    leg = min(leg_lengths.values()) if leg_lengths else 1.0
+    reach = INITIAL_STRIDE * leg
+    fwd = max(-reach, min(reach, float(fwd_axis @ d)))
+    out = {}
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        ref = feet.sole_ref[side]
+        out[side] = pin.SE3(ref.rotation.copy(), ref.translation + sign * 0.5 * fwd * fwd_axis)
+    return out
+
+
+__all__ = ["FOOT_YAW_RANGE", "INITIAL_STRIDE", "FootTargets", "initial_soles"]

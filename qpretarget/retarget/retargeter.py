@@ -63,13 +63,19 @@ from ..motion.keypoints import (
     KeypointMapError,
     resolve_keypoint_map,
 )
-from ..motion.phases import SIDES, PhaseThresholds, SupportCommand, SupportPhaseDetector
+from ..motion.phases import (
+    SIDES,
+    PhaseThresholds,
+    SupportCommand,
+    SupportPhaseDetector,
+    min_jerk,
+)
 from ..motion.scaling import Scaler
 from ..tasks.com import ComTask
 from ..tasks.frame import FrameTask
 from ..trajectory import RobotTrajectory
 from .binding import RobotBinding, waist_yaw
-from .feet import FootTargets
+from .feet import FootTargets, initial_soles
 from .record import RunRecorder, run_meta
 from .rooting import Rooting, anchors_points  # noqa: F401 (anchors_points re-exported)
 from .spec import (
@@ -80,10 +86,17 @@ from .spec import (
     _number,
     default_robot_keypoints,
 )
-from .stepping import KinematicStepper, StepCommand
+from .stepping import KinematicStepper, StepCommand, blend_pose
 from .stream import Command, KeypointStream, iter_frames
 from .support import FOOT_POINTS, ComEstimate, FootSupport
 from .whole_body import whole_body_config
+
+#: The initial stance is solved until the base and the soles move slower than this [m/s] ...
+INITIAL_SETTLED = 1e-3
+#: ... or for at most this many control ticks after the ramp (not recorded).
+INITIAL_TICKS = 300
+#: The targets of the initial stance are ramped in from the reference posture over this [s].
+INITIAL_RAMP = 0.5
 
 
 class Retargeter:
@@ -427,8 +440,8 @@ class Retargeter:
         static = self.support is not None and self.support.mode == "static"
         self.sequencer = self.feet.sequencer(self.dt) if self.feet and static else None
         self.stepper = (
-            KinematicStepper(self.support.stepping, dt=self.dt)
-            if self.support is not None and not static
+            KinematicStepper(self.support.stepping, dt=self.dt, toes=self.feet.toe_geometry())
+            if self.feet is not None and self.support is not None and not static
             else None
         )
         self._foot_targets: FootTargets | None = None
@@ -485,9 +498,79 @@ class Retargeter:
             if len(self._calibration_samples) < self.spec.calibration_frames:
                 return []
             self._calibrate(self._calibration_samples)
+            if self.stepper is not None and self._sup.stepping.initial_stance:
+                self._initial_stance(self._calibration_samples[0][1])
             pending, self._pending = self._pending, []
             return [self._process(tp, yp) for tp, yp in pending]
         return [self._process(t, y)]
+
+    def _initial_stance(self, y: np.ndarray) -> None:
+        """Start in the person's first-sample stance (``stepping.initial_stance``).
+
+        The soles are put where the scaled person's feet are
+        (:func:`~qpretarget.retarget.feet.initial_soles`) and every task gets its target of
+        that sample, rooted at those soles; the controller, contacts off, runs on these fixed
+        targets until the floating base and the soles are still (every coordinate slower than
+        :data:`INITIAL_SETTLED` m/s; at most :data:`INITIAL_TICKS` ticks, none recorded) and is
+        reset there at rest, both contacts anchored where the soles came to rest. The run's
+        first tick starts from that posture, the person's stance, instead of the reference
+        posture with the feet side by side (a clip starting mid-stride then kept the offset of
+        the foot behind through the whole run). Online and offline do the same at the same
+        sample.
+        """
+        ctrl, feet, cal = self.controller, self._fs, self._cal
+        stream = self._require_stream()
+        kp, rots, missing = stream.unpack(y)
+        soles = initial_soles(
+            feet, cal, self._leg_scale, self.leg_lengths, kp, self._sup.detection.height_off
+        )
+        if soles is None or self._rooting is None:
+            return
+        human = {k: kp[k] for k in cal.tree}
+        anchors = {s: feet.ankle_of(s, soles[s]) for s in SIDES}
+        scaled = self._rooting.scale_from(human, "double", anchors)
+        ctrl.set_contacts([])
+
+        def targets(w: float) -> dict[str, Any]:
+            out: dict[str, Any] = {}
+            self.binding.task_targets(
+                out, cal, self._targets_ref, w, self._skipped, scaled, kp, rots, missing, None
+            )
+            for side, sole in soles.items():
+                M = blend_pose(feet.sole_ref[side], sole, w) * feet.sole_to_task[side]
+                out[self._sup.feet[side].task] = M.homogeneous
+            return out
+
+        def points() -> np.ndarray:
+            state = ctrl.state
+            return np.array(
+                [state.q[:3]] + [state.frame_placement(feet.sole_ids[s]).translation for s in SIDES]
+            )
+
+        ramp = max(1, round(INITIAL_RAMP / self.dt))
+        for k in range(ramp):
+            ctrl.step(targets(min_jerk((k + 1) / ramp)), dt=self.dt)
+        final = targets(1.0)
+        before = points()
+        for _ in range(INITIAL_TICKS):
+            ctrl.step(final, dt=self.dt)
+            now = points()
+            if float(np.max(np.abs(now - before))) < INITIAL_SETTLED * self.dt:
+                break
+            before = now
+        ctrl.reset(ctrl.q.copy())
+        ctrl.set_contacts([fb.contact for fb in self._sup.feet.values()])
+        if "waist" in self.robot_map.keypoints:
+            waist = self.com_estimate.robot_point("waist", ctrl.state.data)
+            self._rooting.waist_height = float(waist[2])
+        self._targets_ref = {
+            n: (p.copy(), R.copy())
+            for n, (p, R) in (
+                (n, cast(FrameTask, t).current_pose(ctrl.state))
+                for n, t in ctrl.tasks.items()
+                if n in self._targets_ref
+            )
+        }
 
     # The per-tick work: scaling, phases, targets, controller step, record.
     def _process(self, t: float, y: np.ndarray) -> Command:
@@ -651,9 +734,18 @@ class Retargeter:
             desired, scaled, kp, soles, stepper.contacts, self.detector.height, stepper.ground
         )
         before = dict(stepper.states)
+        # Heel off: the person's ankle rises over its ground more than the toe does (a foot
+        # flat on a raised surface is not a toe-off), scaled.
+        rise: dict[str, float] = {}
+        for side in SIDES:
+            h = self.detector.point_height.get(side) or []
+            if f"{side}_ankle" in kp and f"{side}_toe" in kp and len(h) >= 2:
+                if math.isfinite(h[0] - h[1]):
+                    rise[side] = self._leg_scale * (h[0] - h[1])
         cmd = stepper.update(
-            t, self.detector.feet, soles, desired, human_foot, flight=self.detector.flight
-        )
+            t, self.detector.feet, soles, desired, human_foot, flight=self.detector.flight,
+            toe_rise=rise,
+        )  # fmt: skip
         for side in SIDES:
             if before[side] == "swing" and cmd.states[side] != "swing":
                 ft.touched_down(side, kp)

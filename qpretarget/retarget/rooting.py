@@ -10,8 +10,9 @@ at; :class:`Rooting` scales the person from it (Poubel 2014 eq. 1,
   over ``scaling.blend_time`` (minimum jerk);
 * in flight (kinematic mode) the waist moves from where it left the ground like the person's,
   times the calibration's root scale;
-* in kinematic single support the pelvis height is the person's times the leg-length ratio
-  (the chain from the support foot places it horizontally);
+* in kinematic single support the pelvis height is the person's change of height since
+  calibration times the leg-length ratio, from the robot's waist height at the start of the run
+  (:attr:`Rooting.waist_height`; the chain from the support foot places it horizontally);
 * no supporting leg is stretched beyond ``scaling.leg_extension`` of its length
   (:func:`~qpretarget.motion.scaling.limit_leg_extension`).
 """
@@ -70,6 +71,10 @@ class Rooting:
         self.blend: tuple[float, np.ndarray] | None = None
         self.flight_root: tuple[np.ndarray, np.ndarray] | None = None
         self.last_waist: tuple[np.ndarray, np.ndarray] | None = None
+        #: Robot waist height [m] matching the person's at calibration: the reference
+        #: posture's, or the initial stance's (``stepping.initial_stance``, set by the
+        #: retargeter: a staggered stance holds the pelvis lower).
+        self.waist_height = float(calibration.robot_waist[2])
 
     def scale(
         self,
@@ -114,7 +119,7 @@ class Rooting:
                 return self.scaler.scale_rooted(human, "waist", waist)
         scaled = self.scaler.scale(human, support=root, anchors=anchors)
         if self.kinematic and root in SIDES and self.scaler.method == "poubel":
-            z = cal.robot_waist[2] + self.leg_scale * (human["waist"][2] - cal.human_waist[2])
+            z = self.waist_height + self.leg_scale * (human["waist"][2] - cal.human_waist[2])
             dz = z - scaled["waist"][2]
             if math.isfinite(dz):
                 fixed = anchors_points(anchors)

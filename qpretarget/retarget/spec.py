@@ -23,7 +23,7 @@ from ..motion.scaling import SCALING_METHODS
 from ..tasks.com import ComTask
 from ..tasks.frame import FrameTask
 from ..validation import check_keys
-from .stepping import StepSettings
+from .stepping import BOOL_SETTINGS, StepSettings
 
 #: Keys of the ``retarget:`` section.
 RETARGET_KEYS = (
@@ -426,7 +426,8 @@ def _parse_support(raw: Any, controller: Controller, path: str) -> SupportSpec:
     check_keys(step, [f.name for f in fields(StepSettings)], f"{path}.stepping")
     try:
         step_args: dict[str, Any] = {
-            k: v if k == "pivot" else _number(v, f"{path}.stepping.{k}") for k, v in step.items()
+            k: v if k in BOOL_SETTINGS else _number(v, f"{path}.stepping.{k}")
+            for k, v in step.items()
         }
         stepping = StepSettings(**step_args)
     except ValueError as exc:

@@ -38,13 +38,16 @@ import pinocchio as pin
 from ..motion.phases import _OTHER, SIDES, _positive, min_jerk
 
 #: Foot states.
-FOOT_STATES = ("stance", "swing", "landing")
+FOOT_STATES = ("stance", "toe_off", "swing", "landing")
 
 
 #: A stance foot pivots only while the other foot's target is lower than this [m]: not under a
 #: kick (with pivot_radius 0.12 m on the front kicks: swing-height ratio 0.69 and no contact
 #: giving with this guard; without it the next landing made the contacts give).
 PIVOT_SWING_MAX = 0.25
+
+#: The switches of :class:`StepSettings` (every other setting is a positive number).
+BOOL_SETTINGS = frozenset({"pivot", "initial_stance", "toe_off"})
 
 
 @dataclass(frozen=True)
@@ -65,6 +68,18 @@ class StepSettings:
         pivot_rate: Largest yaw rate of a pivoting anchor [rad/s].
         pivot: Whether stance feet pivot at all (the shipped G1 and Talos configs: off, see
             docs/retargeting.md section 4b).
+        toe_off: Whether a stance foot rolls onto its toes when the person's heel rises
+            (walk push-off, a rise before a jump): contact off, the sole turned about its front
+            edge, which stays where it stood.
+        toe_rise: Rise of the person's ankle above its stance height (scaled) that starts a
+            toe-off [m]; under half of it the heel is down again.
+        toe_pitch: Largest pitch of a sole in toe-off [rad].
+        toe_time: Longest toe-off [s]: a heel held up longer (on the ball of the foot) is put
+            down flat again, until the person's heel has been down.
+        initial_stance: Start the run in the person's first-sample stance (the soles where the
+            scaled person's feet are, solved to convergence before the first tick,
+            :func:`~qpretarget.retarget.feet.initial_soles`) instead of the robot's reference
+            posture with the feet side by side.
     """
 
     clearance: float = 0.02
@@ -78,18 +93,25 @@ class StepSettings:
     pivot_radius: float = 0.03
     pivot_rate: float = math.radians(360.0)
     pivot: bool = True
+    initial_stance: bool = True
+    toe_off: bool = True
+    toe_rise: float = 0.02
+    toe_pitch: float = 0.6
+    toe_time: float = 0.4
 
     def __post_init__(self) -> None:
         """Validate.
 
         Raises:
-            ValueError: A value is not positive, or ``pivot`` is not a bool.
+            ValueError: A value is not positive, or a switch is not a bool.
         """
-        if not isinstance(self.pivot, bool):
-            raise ValueError(f"pivot must be true or false, got {self.pivot!r}")
         for name in self.__dataclass_fields__:
-            if name != "pivot":
-                _positive(getattr(self, name), name)
+            value = getattr(self, name)
+            if name in BOOL_SETTINGS:
+                if not isinstance(value, bool):
+                    raise ValueError(f"{name} must be true or false, got {value!r}")
+            else:
+                _positive(value, name)
 
 
 @dataclass
@@ -125,10 +147,15 @@ def _flat(yaw: float, p: np.ndarray) -> pin.SE3:
     return pin.SE3(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.asarray(p, float))
 
 
-def _blend(a: pin.SE3, b: pin.SE3, w: float) -> pin.SE3:
+def blend_pose(a: pin.SE3, b: pin.SE3, w: float) -> pin.SE3:
     """Pose ``w`` of the way from ``a`` to ``b`` (straight line, geodesic rotation)."""
     R = a.rotation @ pin.exp3(w * pin.log3(a.rotation.T @ b.rotation))
     return pin.SE3(R, a.translation + w * (b.translation - a.translation))
+
+
+def _xy(points: np.ndarray) -> np.ndarray:
+    """Horizontal parts ``(k, 2)`` of one point ``(3,)`` or of points ``(k, 3)``."""
+    return np.atleast_2d(np.asarray(points, float))[:, :2].copy()
 
 
 def _wrap(a: float) -> float:
@@ -141,11 +168,21 @@ class KinematicStepper:
     Args:
         settings: :class:`StepSettings`.
         dt: Control period [s].
+        toes: side -> ``(front edge x [m], ankle (3,))`` in the sole frame, for toe-offs.
     """
 
-    def __init__(self, settings: StepSettings | None = None, *, dt: float = 0.01) -> None:
+    def __init__(
+        self,
+        settings: StepSettings | None = None,
+        *,
+        dt: float = 0.01,
+        toes: Mapping[str, tuple[float, np.ndarray]] | None = None,
+    ) -> None:
         self.settings = settings if settings is not None else StepSettings()
         self.dt = float(dt)
+        #: side -> (front edge x of the sole [m], ankle position in the sole frame (3,)): the
+        #: toe-off geometry (no toe-off without it).
+        self.toes = dict(toes or {})
         self.states: dict[str, str] = {s: "stance" for s in SIDES}
         self.ground = 0.0
         self.log: list[tuple[float, str]] = []
@@ -155,6 +192,8 @@ class KinematicStepper:
         self._pivot: dict[str, tuple[float, np.ndarray, float, bool]] = {}
         self._anchor: dict[str, pin.SE3] = {}
         self._lift: dict[str, tuple[float, pin.SE3]] = {}
+        self._toe_down: set[str] = set()
+        self._toe_armed: set[str] = set()
         self._started = False
 
     def __repr__(self) -> str:
@@ -183,10 +222,11 @@ class KinematicStepper:
         self._since = {s: t for s in SIDES}
         self._anchor = {s: soles[s].copy() for s in SIDES}
         self._landing, self._target, self._pivot, self._lift = {}, {}, {}, {}
+        self._toe_down, self._toe_armed = set(), set()
         for side, foot in (human_foot or {}).items():
             if foot is not None:
                 yaw0 = _yaw_of(soles[side].rotation)
-                self._pivot[side] = (foot[0], np.array(foot[1][:2]), yaw0, False)
+                self._pivot[side] = (foot[0], _xy(foot[1]), yaw0, False)
         self.log = [(t, "stance/stance")]
         self._started = True
 
@@ -199,6 +239,7 @@ class KinematicStepper:
         desired: Mapping[str, pin.SE3],
         human_foot: Mapping[str, tuple[float, np.ndarray] | None],
         flight: bool | None = None,
+        toe_rise: Mapping[str, float] | None = None,
     ) -> StepCommand:
         """Advance every foot by one tick.
 
@@ -207,10 +248,13 @@ class KinematicStepper:
             human_support: side -> the person's foot is in support (detector, with hysteresis).
             soles: side -> current sole pose of the robot.
             desired: side -> sole pose from the scaled person (scaled ankle, foot yaw, flat).
-            human_foot: side -> ``(yaw [rad], scaled ankle position (3,))`` of the person's foot,
-                or ``None`` when unknown (no pivots then).
+            human_foot: side -> ``(yaw [rad], scaled points)`` of the person's foot (its ankle
+                ``(3,)``, or ankle and toe ``(2, 3)``: a pivot keeps one of them within
+                ``pivot_radius``), or ``None`` when unknown (no pivots then).
             flight: The person is in flight (both feet up; default: neither foot in support).
                 Only then may both robot feet leave the ground.
+            toe_rise: side -> rise of the person's ankle above its stance height, scaled [m]
+                (heel off the ground: toe-off; ``None``: no toe-offs).
 
         Returns:
             The :class:`StepCommand` of this tick.
@@ -225,13 +269,34 @@ class KinematicStepper:
         for side in SIDES:
             state = self.states[side]
             up = not human_support.get(side, True)
+            other_state = self.states[_OTHER[side]]
+            other_stands = other_state == "stance"
+            rise = (toe_rise or {}).get(side, 0.0)
+            heel_up = st.toe_off and side in self.toes and rise > st.toe_rise
             if state == "stance":
-                other_stands = self.states[_OTHER[side]] == "stance"
-                if up and (other_stands or flight) and t - self._since[side] >= st.min_stance:
+                settled = t - self._since[side] >= st.min_stance
+                if up and (other_state in ("stance", "toe_off") or flight) and settled:
                     self._enter(t, side, "swing")
                     self._lift[side] = (t, soles[side].copy())
                     self._pivot.pop(side, None)
-                elif (
+                elif not heel_up and rise <= 0.5 * st.toe_rise:
+                    self._toe_armed.add(side)
+                if (
+                    self.states[side] == "stance"
+                    and not up
+                    and heel_up
+                    and side in self._toe_armed
+                    and other_stands
+                    and settled
+                ):
+                    # The person's heel rises (push-off): the sole rolls onto its toes.
+                    self._enter(t, side, "toe_off")
+                    self._toe_armed.discard(side)
+                    self._pivot.pop(side, None)
+                    continue
+                if self.states[side] != "stance":
+                    continue
+                if (
                     self.states[_OTHER[side]] != "swing"
                     or float(desired[_OTHER[side]].translation[2]) - self.ground > PIVOT_SWING_MAX
                 ):
@@ -244,6 +309,37 @@ class KinematicStepper:
                     pivot = self._pivot_anchor(side, human_foot.get(side))
                     if pivot is not None:
                         anchors[side] = pivot
+            elif state == "toe_off":
+                other_up = not human_support.get(_OTHER[side], True)
+                if up and (other_stands or flight):
+                    self._enter(t, side, "swing")
+                    self._lift[side] = (t, soles[side].copy())
+                    self._toe_down.discard(side)
+                    continue
+                if (
+                    rise <= 0.5 * st.toe_rise
+                    or t - self._since[side] > st.toe_time
+                    or (other_up and not up)
+                ):
+                    # The person's heel is down again, or the toe-off lasts longer than
+                    # toe_time (on the ball of the foot, turning on it), or the other foot
+                    # steps: the sole goes flat about its front edge and is back in contact
+                    # once flat on the floor (the other foot may lift meanwhile).
+                    self._toe_down.add(side)
+                if side in self._toe_down:
+                    sole = soles[side]
+                    h = float(sole.translation[2]) - self.ground
+                    tilt = math.acos(max(-1.0, min(1.0, float(sole.rotation[2, 2]))))
+                    if h <= st.land_height and tilt <= 0.05:
+                        # Anchored flat where the sole is (the toe may have turned a little).
+                        self._enter(t, side, "stance")
+                        self._toe_down.discard(side)
+                        anchor = _flat(
+                            _yaw_of(sole.rotation),
+                            np.array([sole.translation[0], sole.translation[1], self.ground]),
+                        )
+                        self._anchor[side] = anchor
+                        anchors[side] = anchor
             elif state == "swing":
                 if not up:
                     self._enter(t, side, "landing")
@@ -268,7 +364,7 @@ class KinematicStepper:
                         foot = human_foot.get(side)
                         if foot is not None:
                             yaw0 = _yaw_of(anchor.rotation)
-                            self._pivot[side] = (foot[0], np.array(foot[1][:2]), yaw0, False)
+                            self._pivot[side] = (foot[0], _xy(foot[1]), yaw0, False)
         feet: dict[str, pin.SE3] = {}
         for side in SIDES:
             state = self.states[side]
@@ -283,7 +379,12 @@ class KinematicStepper:
                     if w >= 1.0:
                         self._lift.pop(side)
                     else:
-                        target = _blend(start[1], target, w)
+                        target = blend_pose(start[1], target, w)
+                feet[side] = target
+                self._target[side] = target
+            elif state == "toe_off":
+                rise = (toe_rise or {}).get(side, 0.0)
+                target = self.toe_pose(side, 0.0 if side in self._toe_down else rise)
                 feet[side] = target
                 self._target[side] = target
             elif state == "landing":
@@ -311,6 +412,30 @@ class KinematicStepper:
             states=dict(self.states),
         )
 
+    def toe_pose(self, side: str, rise: float) -> pin.SE3:
+        r"""Sole pose of a toe-off: the stance anchor turned about the sole's front edge.
+
+        With :math:`d` the distance from the ankle to the front edge along the sole and
+        :math:`h` the ankle's height over the sole, turning by :math:`\theta` raises the ankle
+        by :math:`d \sin\theta - h (1 - \cos\theta) = r \sin(\theta + \varphi) - h`
+        (:math:`r = \sqrt{d^2 + h^2}`, :math:`\varphi = \operatorname{atan2}(h, d)`): the pitch
+        that raises it by ``rise`` is :math:`\theta = \arcsin((\mathrm{rise} + h) / r) -
+        \varphi`, within ``toe_pitch``; the front edge stays where it stood.
+        """
+        anchor = self._anchor[side]
+        x_front, ankle = self.toes[side]
+        d, h = x_front - float(ankle[0]), float(ankle[2])
+        r = math.hypot(d, h)
+        if rise <= 0.0 or r <= 0.0:
+            return anchor.copy()
+        theta = math.asin(min(1.0, (rise + h) / r)) - math.atan2(h, d)
+        theta = max(0.0, min(self.settings.toe_pitch, theta))
+        c, s_ = math.cos(theta), math.sin(theta)
+        Ry = np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
+        edge = np.array([x_front, 0.0, 0.0])
+        local = pin.SE3(Ry, edge - Ry @ edge)
+        return anchor * local
+
     def landing_spot(self, side: str) -> pin.SE3 | None:
         """Sole pose a landing foot is going down to (``None`` unless ``side`` is landing)."""
         if self.states[side] != "landing":
@@ -328,7 +453,7 @@ class KinematicStepper:
             self._pivot.pop(side, None)
             return
         anchor_yaw = _yaw_of(self._anchor[side].rotation)
-        self._pivot[side] = (foot[0], np.array(foot[1][:2]), anchor_yaw, False)
+        self._pivot[side] = (foot[0], _xy(foot[1]), anchor_yaw, False)
 
     def _pivot_anchor(self, side: str, foot: tuple[float, np.ndarray] | None) -> pin.SE3 | None:
         """The ramped anchor of a stance foot that pivots, or ``None``.
@@ -344,13 +469,16 @@ class KinematicStepper:
             # spin): the pivot is measured from the first flat sample of the stance (else a
             # spinning dancer's stance foot never pivoted: spin heading error 98 deg).
             anchor_yaw = _yaw_of(self._anchor[side].rotation)
-            self._pivot[side] = (foot[0], np.array(foot[1][:2]), anchor_yaw, False)
+            self._pivot[side] = (foot[0], _xy(foot[1]), anchor_yaw, False)
             return None
         yaw0, xy0, anchor_yaw0, active = start
         st = self.settings
-        yaw, ankle = foot
+        yaw, points = foot
         turn = _wrap(yaw - yaw0)
-        if float(np.linalg.norm(np.asarray(ankle[:2]) - xy0)) > st.pivot_radius:
+        xy = _xy(points)
+        if xy.shape != xy0.shape:
+            return None
+        if float(np.min(np.linalg.norm(xy - xy0, axis=1))) > st.pivot_radius:
             return None
         if not active:
             if abs(turn) < st.pivot_yaw:

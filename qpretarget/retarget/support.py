@@ -109,6 +109,13 @@ class FootSupport:
             max_stride=seq.max_stride if seq.max_stride is not None else 0.25 * leg,
         )
 
+    def toe_geometry(self) -> dict[str, tuple[float, np.ndarray]]:
+        """Per side, the front edge x of the sole rectangle and the ankle, in the sole frame."""
+        return {
+            side: (float(rect[1]), -self.ankle_to_sole[side])
+            for side, rect in self.sole_rectangles.items()
+        }
+
     def sequencer(self, dt: float) -> SupportSequencer:
         """A fresh :class:`SupportSequencer` for a run at period ``dt`` [s]."""
         return SupportSequencer(self.sole_rectangles, self.sequence_settings, dt=dt)
