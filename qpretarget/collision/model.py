@@ -43,6 +43,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigError, UnknownNameError
+from ..kernel import kernel
 from ..robot import RobotModel, RobotState
 from .shapes import LinkShape, link_shapes
 
@@ -161,6 +162,9 @@ class CollisionModel:
         path: str = "",
     ) -> None:
         self.robot = robot
+        # With the compiled kernel, the pairs of `need` are computed in one call (no activation
+        # flags in the geometry data, witness points and normals read into arrays).
+        self._kernel = kernel()
         self.hysteresis = float(hysteresis)
         self.geometry = geometry
         known = dict(link_shapes(robot, geometry, hull_vertices))
@@ -202,6 +206,9 @@ class CollisionModel:
         for req in self.gdata.distanceRequests:
             req.enable_signed_distance = True
         self._results = list(self.gdata.distanceResults)
+        self._dbuf = np.full(self.n_pairs, np.inf)
+        self._wpa = np.zeros((self.n_pairs, 3))
+        self._wn = np.zeros((self.n_pairs, 3))
         self._flags = np.ones(self.n_pairs, dtype=bool)  # mirrors gdata.activeCollisionPairs
         self._flag_bytes = self._flags.tobytes()
         self._idx = np.arange(self.n_pairs)
@@ -334,9 +341,12 @@ class CollisionModel:
         self.active = act
         # Witness points and normals are read from the results on demand (:meth:`witnesses`):
         # each read crosses into C++, and capped rows need only the closest pairs'.
-        res = self._results
-        self._sel = [res[i] for i in act.tolist()]
-        self._pa = self._n = None
+        if self._kernel is not None:  # witness points already read by the kernel
+            self._pa, self._n = self._wpa[act], self._wn[act]
+        else:
+            res = self._results
+            self._sel = [res[i] for i in act.tolist()]
+            self._pa = self._n = None
         self.last_n_computed = int(idx.size)
         self.last_update_time = time.perf_counter() - t0
         return lb
@@ -368,6 +378,16 @@ class CollisionModel:
         """Exact (coal) distances of the active pairs (:attr:`_idx`), written into the bounds."""
         if not self._idx.size:
             return self._no_distance
+        if self._kernel is not None:
+            t1 = time.perf_counter()
+            self._kernel.geometry_distances(
+                self._model, state.data, self.gmodel, self.gdata, self._flags, placed,
+                self._dbuf, self._wpa, self._wn,
+            )  # fmt: skip
+            self.last_gjk_time += time.perf_counter() - t1
+            d = self._dbuf[self._idx]
+            self.distances[self._idx] = d
+            return d
         if not placed:
             pin.updateGeometryPlacements(self._model, state.data, self.gmodel, self.gdata)
         t1 = time.perf_counter()
@@ -383,13 +403,14 @@ class CollisionModel:
         nb = need.tobytes()
         if nb == self._flag_bytes:
             return
-        gd = self.gdata
-        flips = np.flatnonzero(need != self._flags)
-        for i, on in zip(flips.tolist(), need[flips].tolist(), strict=True):
-            if on:
-                gd.activateCollisionPair(i)
-            else:
-                gd.deactivateCollisionPair(i)
+        if self._kernel is None:  # the kernel computes the pairs of `need` directly
+            gd = self.gdata
+            flips = np.flatnonzero(need != self._flags)
+            for i, on in zip(flips.tolist(), need[flips].tolist(), strict=True):
+                if on:
+                    gd.activateCollisionPair(i)
+                else:
+                    gd.deactivateCollisionPair(i)
         self._flags = need
         self._flag_bytes = nb
         self._idx = np.flatnonzero(need)

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..kernel import kernel, why_not
-from ..tasks.base import CostBlock
+from ..tasks.base import CostBlock, Task
 
 if TYPE_CHECKING:
     from .controller import Controller
@@ -57,6 +57,8 @@ class CompiledTick:
         self.bound_names: list[str] = []
         self._blocks: list[CostBlock] = []
         self._slices: list[slice] = []
+        self._python: list[tuple[int, Task]] = []  # tasks without a compiled part (fixed)
+        self._ramping: dict[int, Task] = {}  # compiled tasks ramping back after a missing target
 
     @classmethod
     def compile(cls, ctrl: Controller) -> tuple[CompiledTick | None, str]:
@@ -86,6 +88,8 @@ class CompiledTick:
             )
             if t.compile_into(tick, row):
                 self.compiled_tasks.add(t.name)
+            else:
+                self._python.append((len(self._blocks) - 1, t))
             row += t.dim
         boxes = [c for c in ctrl.bound_constraints if c.has_bounds]
         # The box is merged in one place: the kernel when every box module has a compiled part.
@@ -129,23 +133,35 @@ class CompiledTick:
         """
         ctrl = self.ctrl
         st = ctrl.state
-        g = self.tick.build(st.q, st.v, dt)
+        q, v = st.q, st.v
+        if not (q.flags.c_contiguous and v.flags.c_contiguous):  # a strided view given by a user
+            q, v = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float)
+        g = self.tick.build(q, v, dt)
         blocks = self._blocks
-        # A task without a compiled part, or whose weight ramps back after a missing target,
-        # writes its rows in Python (over the kernel's, same buffers).
+        # Tasks without a compiled part, and compiled ones whose weight ramps back after a
+        # missing target (Task.block scales it), write their rows in Python over the kernel's.
         out = None
-        for i, t in enumerate(ctrl.tasks.values()):
-            if t.name not in self.compiled_tasks or t.presence < 1.0:
-                if out is None:
-                    out = list(blocks)
+        if self._python or self._ramping:
+            out = list(blocks)
+            for i, t in self._python:
                 out[i] = t.block(st, dt)
-            elif t.weight is not blocks[i].weight:  # a task that changed its weights
-                b, sl = blocks[i], self._slices[i]
-                blocks[i] = CostBlock(b.task, b.J, b.v_star, t.weight, b.level, self.e_all[sl])
+            for i, t in list(self._ramping.items()):
+                out[i] = t.block(st, dt)
+                if t.presence >= 1.0:
+                    del self._ramping[i]
         gave = None
         if self.all_bounds:
             gave = {n: float(x) for n, x in zip(self.bound_names, g, strict=True) if x == x}
         return (blocks if out is None else out), gave
+
+    def note_missing(self, task: Task) -> None:
+        """``task`` got a missing (NaN) target: its rows come from Python until it recovers."""
+        if task.name in self.compiled_tasks:
+            self._ramping[list(self.ctrl.tasks).index(task.name)] = task
+
+    def reset(self) -> None:
+        """A reset restores every task's full weight."""
+        self._ramping.clear()
 
     def hessian(self, sqrt_w: np.ndarray, damping2: float, H: np.ndarray, g: np.ndarray) -> None:
         r"""Augmentation's :math:`H = J_w^\top J_w + \lambda^2 I`, :math:`g = -J_w^\top r_w`.

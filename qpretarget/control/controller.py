@@ -154,6 +154,7 @@ class Controller:
         #: names the module (or the missing kernel) that keeps the tick in Python.
         self.compiled: CompiledTick | None
         self.compiled, self.compiled_reason = CompiledTick.compile(self)
+        self._notes: list[str] = []  # reports for the next StepResult
         self.reset()
 
     def _build_tasks(self) -> dict[str, Task]:
@@ -301,6 +302,9 @@ class Controller:
         if self.fallback is not None:  # runs from reset() must be reproducible to the last bit
             self.fallback.reset()
         self.level_impl.reset()
+        ct = getattr(self, "compiled", None)  # (not yet set during __init__'s first reset)
+        if ct is not None:
+            ct.reset()
         out = q.copy()
         out.setflags(write=False)
         return out
@@ -396,6 +400,8 @@ class Controller:
             task = self.tasks[name]
             if not task.set_target(target, tick=self.tick):
                 task.mark_missing()
+                if self.compiled is not None:
+                    self.compiled.note_missing(task)
                 messages.append(
                     f"task {name!r}, tick {self.tick}: target contains NaN or inf; keeping the "
                     "last "
@@ -409,8 +415,19 @@ class Controller:
         perf = time.perf_counter
         t0 = perf()
         ct = self.compiled
+        built = None
         if ct is not None:
-            blocks, gave = ct.build(dt)  # compiled modules in one kernel call, then Python ones
+            try:
+                built = ct.build(dt)  # compiled modules in one kernel call, then Python ones
+            except Exception as exc:  # a kernel error never stops the loop: Python from now on
+                self.compiled = None
+                self.compiled_reason = f"kernel error at tick {self.tick}: {exc!r}"
+                self._notes.append(
+                    f"tick {self.tick}: the compiled kernel failed ({exc!r}); every module runs "
+                    "its Python code from now on (a bug to report)."
+                )
+        if ct is not None and built is not None:
+            blocks, gave = built
             t1 = perf()
             timings["tasks"] = t1 - t0
             bound_gave = self._merge_bounds(dt) if gave is None else gave
@@ -517,6 +534,9 @@ class Controller:
         tb = time.perf_counter()
         tp = self.build_tick(dt)
         build_time = time.perf_counter() - tb
+        if self._notes:
+            messages.extend(self._notes)
+            self._notes.clear()
         out = self.level_impl.solve(tp)
         messages.extend(out.messages)
         errors = TaskErrors(tp.blocks, self.tasks)

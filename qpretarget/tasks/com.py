@@ -3,6 +3,7 @@ r"""Centre-of-mass task: :math:`e = c_r - c`, :math:`J = J_{com}` (rows of the c
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -55,6 +56,7 @@ class ComTask(Task):
             )
         self.axes = axes
         self.rows = np.array([_AXES[a] for a in axes], dtype=int)
+        self._rows_list = self.rows.tolist()
         self.dim = len(self.rows)
         self.target = np.zeros(3)
 
@@ -67,6 +69,12 @@ class ComTask(Task):
 
     def set_target(self, target: Any, *, tick: int | None = None) -> bool:
         """Set the CoM target: a 3-vector, or ``len(axes)`` values for the tracked axes."""
+        if type(target) is np.ndarray and target.shape == (3,) and target.dtype == np.float64:
+            tl = target.tolist()  # fast path: a position array
+            if not all(math.isfinite(tl[r]) for r in self._rows_list):
+                return False
+            self.target = target.copy()
+            return True
         arr = self.target_array(target, tick, "CoM target must be numbers")
         if arr.shape == (3,):
             full = arr

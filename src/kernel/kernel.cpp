@@ -35,6 +35,9 @@
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/spatial.hpp>
+#include <pinocchio/geometry.hpp>
+#include <pinocchio/algorithm/geometry.hpp>
+#include <pinocchio/collision/distance.hpp>
 
 #include <dlfcn.h>
 
@@ -54,6 +57,7 @@ using MapRM = Eigen::Map<RowMat>;
 using MapV = Eigen::Map<Eigen::VectorXd>;
 using Mat6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
 using Arr = nb::ndarray<double, nb::c_contig, nb::device::cpu>;
+using CArr = nb::ndarray<const double, nb::c_contig, nb::device::cpu>;  // read-only is fine
 using IArr = nb::ndarray<int64_t, nb::c_contig, nb::device::cpu>;
 using BArr = nb::ndarray<bool, nb::c_contig, nb::device::cpu>;
 
@@ -76,18 +80,21 @@ struct Buf {
   explicit Buf(Arr a) : owner(nb::find(a)), p(a.data()), n(a.size()) {}
 };
 
-// Read a float64 array attribute of a Python object (a task's current target).
-static const double *attr_array(PyObject *obj, PyObject *name, size_t expect) {
+// Read a float64 array attribute of a Python object (a task's current target). `keep` holds a
+// reference until the next read, so the data stays valid while the tick uses it (a target that
+// is not a C-contiguous float64 array is converted; the tasks store such arrays already).
+static const double *attr_array(PyObject *obj, PyObject *name, size_t expect, nb::object &keep) {
   PyObject *a = PyObject_GetAttr(obj, name);
   if (!a) throw nb::python_error();
-  nb::object holder = nb::steal(a);
-  Arr arr = nb::cast<Arr>(holder);
-  if (arr.size() != expect) throw std::runtime_error("target of unexpected size");
-  // The task keeps the array alive (it is its attribute); the kernel reads it now.
+  keep = nb::steal(a);
+  CArr arr;
+  if (!nb::try_cast<CArr>(keep, arr)) {
+    keep = nb::module_::import_("numpy").attr("ascontiguousarray")(keep, "float64");
+    arr = nb::cast<CArr>(keep);
+  }
+  if (arr.size() != expect) throw std::runtime_error("a task target of unexpected size");
   return arr.data();
 }
-
-static double sq(double x) { return x * x; }
 
 // ---------------------------------------------------------------- tasks
 struct TaskK {
@@ -95,6 +102,7 @@ struct TaskK {
   int identity_col = -1;  // >= 0: the rows are [0 I] from this column on (posture)
   double gain = -1.0;  // <= 0: None (K = 1/dt)
   nb::object py;       // the Python task (targets are read from it every tick)
+  nb::object keep1, keep2;  // the target arrays read this tick
   virtual ~TaskK() = default;
   // Writes e (dim) and J (dim x nv) at row `row`.
   virtual void compute(const Model &m, Data &d, const Eigen::VectorXd &q, MapRM &J, double *e) = 0;
@@ -118,7 +126,7 @@ struct FrameTaskK : TaskK {
     pinocchio::getFrameJacobian(m, d, fid, pinocchio::LOCAL_WORLD_ALIGNED, J6);
     int r = row;
     if (mode != 1) {
-      Eigen::Map<const Eigen::Vector3d> pt(attr_array(py.ptr(), s_pos, 3));
+      Eigen::Map<const Eigen::Vector3d> pt(attr_array(py.ptr(), s_pos, 3, keep1));
       Eigen::Vector3d p = M.translation();
       if (has_offset) {
         Eigen::Vector3d ro = R * offset;
@@ -135,7 +143,7 @@ struct FrameTaskK : TaskK {
     }
     if (mode != 0) {
       // rotation_target is a row-major (3, 3) numpy array
-      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> Rt(attr_array(py.ptr(), s_rot, 9));
+      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> Rt(attr_array(py.ptr(), s_rot, 9, keep2));
       Eigen::Matrix3d A = Rt * R.transpose();
       e[0] = 0.5 * (A(2, 1) - A(1, 2));
       e[1] = 0.5 * (A(0, 2) - A(2, 0));
@@ -151,7 +159,7 @@ struct ComTaskK : TaskK {
   ComTaskK() { s_t = PyUnicode_InternFromString("target"); }
   void compute(const Model &m, Data &d, const Eigen::VectorXd &, MapRM &J, double *e) override {
     const auto &Jc = pinocchio::jacobianCenterOfMass(m, d, true);
-    Eigen::Map<const Eigen::Vector3d> t(attr_array(py.ptr(), s_t, 3));
+    Eigen::Map<const Eigen::Vector3d> t(attr_array(py.ptr(), s_t, 3, keep1));
     const Eigen::Vector3d &c = d.com[0];
     for (size_t i = 0; i < rows.size(); ++i) {
       e[i] = t[rows[i]] - c[rows[i]];
@@ -166,7 +174,7 @@ struct PostureTaskK : TaskK {
   Eigen::VectorXd diff;
   PostureTaskK() { s_t = PyUnicode_InternFromString("q_target"); }
   void compute(const Model &m, Data &, const Eigen::VectorXd &q, MapRM &J, double *e) override {
-    Eigen::Map<const Eigen::VectorXd> qt(attr_array(py.ptr(), s_t, m.nq), m.nq);
+    Eigen::Map<const Eigen::VectorXd> qt(attr_array(py.ptr(), s_t, m.nq, keep1), m.nq);
     diff.resize(m.nv);
     pinocchio::difference(m, q, qt, diff);
     for (int i = 0; i < dim; ++i) e[i] = diff[root_nv + i];
@@ -342,7 +350,7 @@ struct DaqpWork {
   std::vector<double> A, bu, bl, x, lamr;
 };
 
-static nb::tuple daqp_solve(Arr H, Arr g, Arr C, Arr l, Arr u, Arr lb, Arr ub, Arr x_out, Arr lam,
+static nb::tuple daqp_solve(Arr H, Arr g, CArr C, CArr l, CArr u, CArr lb, CArr ub, Arr x_out, Arr lam,
                             bool warm, double primal_tol, double dual_tol, int iter_limit,
                             double eps_prox) {
   static DaqpWork w;
@@ -414,6 +422,40 @@ static nb::tuple daqp_solve(Arr H, Arr g, Arr C, Arr l, Arr u, Arr lb, Arr ub, A
   return nb::make_tuple(flag, res.iter, ok);
 }
 
+// ---------------------------------------------------------------- collision distances
+// The exact distances of the pairs marked in `need` (collision/model.py CollisionModel): the
+// geometry placements of this tick's kinematics (unless `placed`), then coal's signed distance
+// of each marked pair in index order (pinocchio computeDistance, the call computeDistances makes
+// for an active pair: same GJK warm starts, same results), its witness point on body a and unit
+// normal from a to b written into (P,) and (P, 3) arrays, in one call instead of a Python loop
+// over the pairs. Returns the number of pairs computed.
+static int geometry_distances(nb::handle py_model, nb::handle py_data, nb::handle py_gmodel,
+                              nb::handle py_gdata, BArr need, bool placed, Arr d_out, Arr pa_out,
+                              Arr n_out) {
+  const Model &m = *extract_ref<Model>(py_model, "pinocchio.Model");
+  Data &d = *extract_ref<Data>(py_data, "pinocchio.Data");
+  const pinocchio::GeometryModel &gm = *extract_ref<pinocchio::GeometryModel>(py_gmodel, "pinocchio.GeometryModel");
+  pinocchio::GeometryData &gd = *extract_ref<pinocchio::GeometryData>(py_gdata, "pinocchio.GeometryData");
+  const bool *nd = need.data();
+  size_t P = need.size();
+  if (P != gm.collisionPairs.size() || d_out.size() != P || pa_out.size() != 3 * P || n_out.size() != 3 * P)
+    throw std::invalid_argument("geometry_distances: arrays do not match the pairs");
+  if (!placed) pinocchio::updateGeometryPlacements(m, d, gm, gd);
+  double *dp = d_out.data(), *pap = pa_out.data(), *np_ = n_out.data();
+  int count = 0;
+  for (size_t i = 0; i < P; ++i) {
+    if (!nd[i]) continue;
+    const coal::DistanceResult &r = pinocchio::computeDistance(gm, gd, i);
+    dp[i] = r.min_distance;
+    for (int k = 0; k < 3; ++k) {
+      pap[3 * i + k] = r.nearest_points[0][k];
+      np_[3 * i + k] = r.normal[k];
+    }
+    ++count;
+  }
+  return count;
+}
+
 // ---------------------------------------------------------------- the tick
 struct Tick {
   Model *model;
@@ -455,7 +497,7 @@ struct Tick {
     n_rows = int(l_.size());
   }
 
-  void add_frame_task(nb::object py, int row, int fid, int mode, Arr offset, bool has_offset, double gain) {
+  void add_frame_task(nb::object py, int row, int fid, int mode, CArr offset, bool has_offset, double gain) {
     auto t = std::make_unique<FrameTaskK>();
     t->py = py;
     t->row = row;
@@ -463,7 +505,7 @@ struct Tick {
     t->mode = mode;
     t->dim = mode == 2 ? 6 : 3;
     t->has_offset = has_offset;
-    if (has_offset) t->offset = Eigen::Map<Eigen::Vector3d>(offset.data());
+    if (has_offset) t->offset = Eigen::Map<const Eigen::Vector3d>(offset.data());
     t->gain = gain;
     tasks.push_back(std::move(t));
   }
@@ -486,21 +528,21 @@ struct Tick {
     t->gain = gain;
     tasks.push_back(std::move(t));
   }
-  void add_joint_limits(std::string name, std::vector<int> qi, std::vector<int> vi, Arr lo, Arr hi, double gain) {
+  void add_joint_limits(std::string name, std::vector<int> qi, std::vector<int> vi, CArr lo, CArr hi, double gain) {
     auto b = std::make_unique<JointLimitsK>();
     b->name = name;
     b->qi = qi;
     b->vi = vi;
-    b->lo = Eigen::Map<Eigen::VectorXd>(lo.data(), lo.size());
-    b->hi = Eigen::Map<Eigen::VectorXd>(hi.data(), hi.size());
+    b->lo = Eigen::Map<const Eigen::VectorXd>(lo.data(), lo.size());
+    b->hi = Eigen::Map<const Eigen::VectorXd>(hi.data(), hi.size());
     b->gain = gain;
     bounds.push_back(std::move(b));
   }
-  void add_const_bounds(std::string name, Arr lo, Arr hi) {
+  void add_const_bounds(std::string name, CArr lo, CArr hi) {
     auto b = std::make_unique<ConstBoundsK>();
     b->name = name;
-    b->lo = Eigen::Map<Eigen::VectorXd>(lo.data(), lo.size());
-    b->hi = Eigen::Map<Eigen::VectorXd>(hi.data(), hi.size());
+    b->lo = Eigen::Map<const Eigen::VectorXd>(lo.data(), lo.size());
+    b->hi = Eigen::Map<const Eigen::VectorXd>(hi.data(), hi.size());
     bounds.push_back(std::move(b));
   }
   void add_contacts(int row, std::vector<int> fids, double gain, bool second_order, double cap_lin,
@@ -521,11 +563,11 @@ struct Tick {
 
   // Tasks, bounds (merged) and rows of this tick. Returns the amounts each bound gave
   // (NaN: nothing), one per bound module in merge order.
-  std::vector<double> build(Arr q_, Arr v_, double dt) {
+  std::vector<double> build(CArr q_, CArr v_, double dt) {
     const Model &m = *model;
     Data &d = *data;
-    q = Eigen::Map<Eigen::VectorXd>(q_.data(), m.nq);
-    v = Eigen::Map<Eigen::VectorXd>(v_.data(), m.nv);
+    q = Eigen::Map<const Eigen::VectorXd>(q_.data(), m.nq);
+    v = Eigen::Map<const Eigen::VectorXd>(v_.data(), m.nv);
     MapRM J(J_all.p, m_tasks, m.nv);
     for (auto &t : tasks) {
       double *e = e_all.p + t->row;
@@ -580,7 +622,7 @@ struct Tick {
   // H = Jw' Jw + lambda^2 I and g = -Jw' rw, Jw = diag(sw) J, rw = sw .* v*, over every stacked
   // task row (compiled or not). Rows of [0 I] form (posture) add their weights to the diagonal
   // instead of going through the dense product.
-  void hessian(Arr sw_, double lambda2, Arr H_, Arr g_) {
+  void hessian(CArr sw_, double lambda2, Arr H_, Arr g_) {
     int nv = model->nv;
     const double *swp = sw_.data();
     MapRM J(J_all.p, m_tasks, nv);
@@ -639,6 +681,7 @@ NB_MODULE(_kernel, m) {
   m.def("daqp_error", &daqp_error);
   m.def("daqp_defaults", &daqp_defaults);
   m.def("daqp_solve", &daqp_solve);
+  m.def("geometry_distances", &geometry_distances);
   nb::class_<Tick>(m, "Tick")
       .def(nb::init<nb::handle, nb::handle>())
       .def("set_buffers", &Tick::set_buffers)
