@@ -184,6 +184,11 @@ class EMConfig:
             velocity: the last frame-to-frame step repeated) or ``constant`` (the last pose).
         ar_window: frames used to fit the auto-regression.
         damping: Levenberg-Marquardt damping relative to the mean diagonal of H.
+        reinit_ratio: re-initialisation on a likelihood drop (0: off): when a frame's fitted
+            sigma exceeds this many times the median of the last ``reinit_window`` frames
+            that did not, the frame is fitted again from the last such frame's pose and from
+            the constant-velocity prediction, and the fit with the lowest NLL (eq. 3) kept.
+        reinit_window: frames of the running median of sigma.
     """
 
     outlier_weight: float = 0.1
@@ -209,6 +214,8 @@ class EMConfig:
     prediction: str = "ar3"
     ar_window: int = 10
     damping: float = 1.0e-6
+    reinit_ratio: float = 0.0
+    reinit_window: int = 30
 
 
 @dataclass

@@ -642,6 +642,8 @@ class CloudRetargeter:
         self._anchors: dict[str, tuple[np.ndarray, float]] = {}
         self._centre_time: float | None = None  # time of the last frame with a centre stage
         self._sub: np.ndarray | None = None  # the frame's visible template points (_pose)
+        self._sigmas: list[float] = []  # sigma of the last frames that were not lost
+        self._good: np.ndarray | None = None  # the last such frame's fit
         if self.stability_mode != "none":
             self.tracker.reset()
         self._solver.reset()
@@ -1605,42 +1607,13 @@ class CloudRetargeter:
                 q, ok = self._restore_balance(q)
                 if not ok:
                     status = "relaxed"
-        visible = self._active(self.template.pose(q, jacobians=False))
-        active = self._use_visible(visible)
-        # One set of kd-tree pairs for the position stages of the frame (searched again where
-        # stale, _Neighbours): the cloud and the active points are the same throughout.
-        neighbours = _Neighbours(self)
-        q, sigma2, _ = self._em_stage(
-            "linear", S, Sn, q, sigma2, q_prev, active, em.max_iterations, log, neighbours
-        )
-        for p in range(1, em.visibility_passes):
-            # The visible template points depend on the pose: recompute them at the fit and go on
-            # (a new objective: monotonicity holds within each pass).
-            new_visible = self._active(self.template.pose(q, jacobians=False))
-            if np.array_equal(new_visible, visible):
-                break
-            visible = new_visible
-            active = self._use_visible(visible)
-            neighbours = _Neighbours(self)
-            q, sigma2, _ = self._em_stage(
-                f"linear{p + 1}",
-                S,
-                Sn,
-                q,
-                sigma2,
-                q_prev,
-                active,
-                em.max_iterations,
-                log,
-                neighbours,
-            )
-        if self._estimate_centres and q_prev is not None and self._centre_due(frame):
-            q, sigma2 = self._centre_stage(S, q, sigma2, q_prev, active, log, neighbours)
-        nll = self.final_nll(S, q, sigma2, active, neighbours)
-        if em.refine_iterations and Sn is not None:
-            q, sigma2, _ = self._em_stage(
-                "refine", S, Sn, q, sigma2, q_prev, active, em.refine_iterations, log
-            )
+        q, sigma2, nll = self._stages(S, Sn, q, sigma2, q_prev, frame, log, centres=True)
+        if self._lost(sigma2):
+            q, sigma2, nll = self._reinitialise(S, Sn, (q, sigma2, nll), log)
+        else:
+            self._sigmas.append(math.sqrt(sigma2))
+            self._good = q.copy()
+            del self._sigmas[: -max(self.config.em.reinit_window, 1)]
         self._sub = None
         rule = ""
         if self.stability_mode == "hip_offset":
@@ -1671,6 +1644,112 @@ class CloudRetargeter:
             time.perf_counter() - t0,
             rule,
         )
+
+    def _stages(
+        self,
+        S: np.ndarray,
+        Sn: np.ndarray | None,
+        q: np.ndarray,
+        sigma2: float,
+        q_prev: np.ndarray | None,
+        frame: CloudFrame | np.ndarray | None,
+        log: list[IterationLog],
+        *,
+        centres: bool,
+        tag: str = "",
+    ) -> tuple[np.ndarray, float, float]:
+        """The EM stages of a frame from ``q``: linear, joint centres, refinement.
+
+        Returns the fit, its sigma^2 and the NLL (eq. 3) after the position stages.
+        """
+        em = self.config.em
+        visible = self._active(self.template.pose(q, jacobians=False))
+        active = self._use_visible(visible)
+        # One set of kd-tree pairs for the position stages of the frame (searched again where
+        # stale, _Neighbours): the cloud and the active points are the same throughout.
+        neighbours = _Neighbours(self)
+        q, sigma2, _ = self._em_stage(
+            tag + "linear", S, Sn, q, sigma2, q_prev, active, em.max_iterations, log, neighbours
+        )
+        for p in range(1, em.visibility_passes):
+            # The visible template points depend on the pose: recompute them at the fit and go on
+            # (a new objective: monotonicity holds within each pass).
+            new_visible = self._active(self.template.pose(q, jacobians=False))
+            if np.array_equal(new_visible, visible):
+                break
+            visible = new_visible
+            active = self._use_visible(visible)
+            neighbours = _Neighbours(self)
+            q, sigma2, _ = self._em_stage(
+                f"{tag}linear{p + 1}",
+                S,
+                Sn,
+                q,
+                sigma2,
+                q_prev,
+                active,
+                em.max_iterations,
+                log,
+                neighbours,
+            )
+        if centres and self._estimate_centres and q_prev is not None and frame is not None:
+            if self._centre_due(frame):
+                q, sigma2 = self._centre_stage(S, q, sigma2, q_prev, active, log, neighbours)
+        nll = self.final_nll(S, q, sigma2, active, neighbours)
+        if em.refine_iterations and Sn is not None:
+            q, sigma2, _ = self._em_stage(
+                tag + "refine", S, Sn, q, sigma2, q_prev, active, em.refine_iterations, log
+            )
+        return q, sigma2, nll
+
+    def _lost(self, sigma2: float) -> bool:
+        """Whether the frame's fit looks lost: sigma above ``em.reinit_ratio`` times the median."""
+        em = self.config.em
+        if not em.reinit_ratio > 0 or len(self._sigmas) < 5 or self._good is None:
+            return False
+        return math.sqrt(sigma2) > em.reinit_ratio * float(np.median(self._sigmas))
+
+    def _reinitialise(
+        self,
+        S: np.ndarray,
+        Sn: np.ndarray | None,
+        fit: tuple[np.ndarray, float, float],
+        log: list[IterationLog],
+    ) -> tuple[np.ndarray, float, float]:
+        """Fit the frame again from other starts; keep the lowest NLL (issue 23 item 2).
+
+        Starts: the pose of the last frame that was not lost (the fit may have drifted since)
+        and the constant-velocity prediction (a fast limb the auto-regression lags behind).
+        Each runs the linear and refinement stages (no centre stage: the joint-centre estimate
+        learns from tracked frames only), its temporal term towards its own start. The fits
+        are compared by the NLL of eq. 3 on the same cloud, each with its own sigma^2.
+        """
+        em = self.config.em
+        starts = []
+        if self._good is not None:
+            starts.append(("reinit-last-", self._good))
+        if len(self.history) >= 2:
+            h = self.history
+            starts.append(
+                (
+                    "reinit-velocity-",
+                    pin.integrate(self.model, h[-1], self.model_difference(h[-2], h[-1])),
+                )
+            )
+        best = fit
+        for tag, start in starts:
+            q0 = self._clip(start)
+            if self.stability_mode == "qp":
+                q0, _ = self._restore_balance(q0)
+            q_prev = q0.copy() if em.temporal_reference == "prediction" else self.history[-1]
+            trial_log: list[IterationLog] = []
+            cand = self._stages(
+                S, Sn, q0, em.sigma2_init, q_prev, None, trial_log, centres=False, tag=tag
+            )
+            log.extend(trial_log)
+            if cand[2] < best[2]:
+                best = cand
+        return best
 
     # ------------------------------------------------------------------ a sequence
     def run(

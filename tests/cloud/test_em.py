@@ -202,3 +202,42 @@ def test_constant_velocity_prediction(g1, g1_template):
     assert np.allclose(pin.difference(g1.model, q1, fit.predict()), step, atol=1e-12)
     fit.history = [q1]  # one pose: hold it
     assert np.allclose(fit.predict(), q1)
+
+
+def test_kdtree_e_step_with_normals_and_kept_pairs():
+    """The k-d tree E-step in the 6-D space of eq. 21 (all pairs kept) is the dense one, and
+    reusing its pairs gives the same E-step again: the same sums in another order, 1e-12."""
+    rng = np.random.default_rng(7)
+    S, V = rng.normal(size=(40, 3)) * 0.1, rng.normal(size=(25, 3)) * 0.1
+    Sn = rng.normal(size=(40, 3))
+    Vn = rng.normal(size=(25, 3))
+    Sn /= np.linalg.norm(Sn, axis=1, keepdims=True)
+    Vn /= np.linalg.norm(Vn, axis=1, keepdims=True)
+    active = rng.random(25) < 0.8
+    kw = dict(Sn=Sn, Vn=Vn, normal_weight=0.5, normal_scale=0.05)
+    dense = e_step(S, V, active, 0.004, 0.1, mode="dense", **kw)
+    tree = e_step(S, V, active, 0.004, 0.1, mode="kdtree", neighbors=25, **kw)
+    again = e_step(S, V, active, 0.004, 0.1, mode="kdtree", pairs=tree.pairs, **kw)
+    for est in (tree, again):
+        assert est.nll == pytest.approx(dense.nll, rel=1e-12)
+        for a in ("P1", "Px", "Pn"):
+            assert np.allclose(getattr(est, a), getattr(dense, a), rtol=1e-12, atol=1e-15)
+        assert est.wN2 == pytest.approx(dense.wN2, rel=1e-12)
+        assert np.all(est.P1[~active] == 0.0)
+
+
+def test_reinitialisation_keeps_the_most_likely_fit(g1, frame):
+    """``em.reinit_ratio``: a frame whose sigma exceeds the ratio times the recent median is
+    fitted again from the last good pose and the constant-velocity prediction; the fit kept
+    has an NLL no larger than the first one (the same first fit: same state before it)."""
+    S, q, sensor, T = frame
+    res = {}
+    for ratio in (0.0, 1e-3):  # 1e-3: every frame after five good ones counts as lost
+        rt = fitter(g1, T, sensor, estep="kdtree", max_iterations=5, reinit_ratio=ratio)
+        rt.history = [start(g1, q)]
+        out = [rt.fit(CloudFrame(S)) for _ in range(6)]
+        res[ratio] = out[-1]
+        assert not any(x.stage.startswith("reinit") for r in out[:5] for x in r.log)
+    stages = {x.stage for x in res[1e-3].log}
+    assert {"reinit-last-linear", "reinit-velocity-linear"} <= stages
+    assert res[1e-3].nll <= res[0.0].nll

@@ -161,3 +161,37 @@ def test_joint_centre_offsets(g1, g1_meshes, posture):
     assert np.allclose(Hqe, np.einsum("m,man,mac->nc", P1, Jm, D), atol=1e-9)
     assert np.allclose(Hee, np.einsum("m,mac,mad->cd", P1, D, D), atol=1e-9)
     assert np.allclose(be, np.einsum("mac,ma->c", D, E), atol=1e-9)
+
+
+def test_posing_a_subset_is_the_same_rows(g1_template, posture):
+    """A frame poses only its visible points (``index``): the same rows, the same M-step sums.
+
+    Rows are computed by the same operations: equal to round-off (1e-15 m). The normal
+    equations of the subset equal those of the whole template with zero weight elsewhere
+    (the zero rows add nothing): 1e-12 relative.
+    """
+    T = g1_template
+    rng = np.random.default_rng(4)
+    idx = np.sort(rng.choice(T.n_points, size=T.n_points // 3, replace=False))
+    full = T.pose(posture)
+    J6 = T.joint_jacobians()
+    sub = T.pose(posture, index=idx)
+    assert np.allclose(sub.points, full.points[idx], atol=1e-15, rtol=0)
+    assert np.allclose(sub.normals, full.normals[idx], atol=1e-15, rtol=0)
+    assert np.allclose(sub.offsets, full.offsets[idx], atol=1e-15, rtol=0)
+    assert T.pose(posture, index=idx, normals=False).normals.shape == (0, 3)
+    P1 = np.zeros(T.n_points)
+    E, En = np.zeros((T.n_points, 3)), np.zeros((T.n_points, 3))
+    P1[idx] = rng.random(len(idx))
+    E[idx] = rng.normal(size=(len(idx), 3))
+    En[idx] = rng.normal(size=(len(idx), 3))
+    H, b = T.normal_equations(full, J6, P1, E, normal_weight=0.5, P1n=P1, En=En)
+    Hs, bs = T.normal_equations(
+        sub, J6, P1[idx], E[idx], normal_weight=0.5, P1n=P1[idx], En=En[idx]
+    )
+    assert np.allclose(Hs, H, rtol=1e-12, atol=1e-12 * np.abs(H).max())
+    assert np.allclose(bs, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
+    Hqe, Hee, be = T.centre_normal_equations(full, J6, P1, E)
+    Hqe_s, Hee_s, be_s = T.centre_normal_equations(sub, J6, P1[idx], E[idx])
+    for a, c in ((Hqe_s, Hqe), (Hee_s, Hee), (be_s, be)):
+        assert np.allclose(a, c, rtol=1e-12, atol=1e-12 * max(np.abs(c).max(), 1e-300))
