@@ -61,6 +61,8 @@ class FootTargets:
         self.leg_extension = leg_extension
         #: side -> the person's ankle where that foot last touched down.
         self.human_anchor: dict[str, np.ndarray] = {}
+        #: side -> the person's toe where that foot last touched down.
+        self.human_toe: dict[str, np.ndarray] = {}
         self.width_r = 0.0
         self.width_h = 0.0
         self._last_yaw: dict[str, float] = {}
@@ -75,6 +77,11 @@ class FootTargets:
             side: np.array(kp[f"{side}_ankle"], float)
             for side in SIDES
             if f"{side}_ankle" in kp and np.all(np.isfinite(kp[f"{side}_ankle"]))
+        }
+        self.human_toe = {
+            side: np.array(kp[f"{side}_toe"], float)
+            for side in SIDES
+            if f"{side}_toe" in kp and np.all(np.isfinite(kp[f"{side}_toe"]))
         }
         for side in SIDES:
             length = self.calibration.human_lengths.get(f"{side}_toe")
@@ -96,6 +103,26 @@ class FootTargets:
         ankle = kp.get(f"{side}_ankle")
         if ankle is not None and np.all(np.isfinite(ankle)):
             self.human_anchor[side] = np.array(ankle, float)
+        toe = kp.get(f"{side}_toe")
+        if toe is not None and np.all(np.isfinite(toe)):
+            self.human_toe[side] = np.array(toe, float)
+
+    def moved(self, side: str, kp: Mapping[str, np.ndarray]) -> float:
+        """How far the person's foot moved since it touched down, scaled [m].
+
+        The smaller horizontal displacement of its ankle and its toe (``0`` when unknown): a
+        foot rolling over its toe (push-off) or turning on it keeps one of them in place; a
+        foot slid or put down elsewhere without a detected lift (a shuffle under the lift
+        height) moves both.
+        """
+        out = math.inf
+        for point, anchors in (("ankle", self.human_anchor), ("toe", self.human_toe)):
+            p, p0 = kp.get(f"{side}_{point}"), anchors.get(side)
+            if p is not None and p0 is not None:
+                d = self.leg_scale * math.hypot(p[0] - p0[0], p[1] - p0[1])
+                if math.isfinite(d):
+                    out = min(out, d)
+        return out if math.isfinite(out) else 0.0
 
     def foot_yaw(self, side: str, kp: Mapping[str, np.ndarray]) -> tuple[float | None, bool]:
         """The person's foot yaw (ankle -> toe) and whether the foot is flat.

@@ -744,7 +744,7 @@ class Retargeter:
                     rise[side] = self._leg_scale * (h[0] - h[1])
         cmd = stepper.update(
             t, self.detector.feet, soles, desired, human_foot, flight=self.detector.flight,
-            toe_rise=rise,
+            toe_rise=rise, moved={s: ft.moved(s, kp) for s in SIDES},
         )  # fmt: skip
         for side in SIDES:
             if before[side] == "swing" and cmd.states[side] != "swing":

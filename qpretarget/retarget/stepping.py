@@ -76,6 +76,10 @@ class StepSettings:
         toe_pitch: Largest pitch of a sole in toe-off [rad].
         toe_time: Longest toe-off [s]: a heel held up longer (on the ball of the foot) is put
             down flat again, until the person's heel has been down.
+        restep: A stance foot whose person's foot moved this far since touch-down without a
+            detected lift (both its ankle and toe, scaled: a shuffle under the detector's lift
+            height, a slide) steps there [m]: lifted at least ``lift_time``, put down where
+            the person's foot is.
         initial_stance: Start the run in the person's first-sample stance (the soles where the
             scaled person's feet are, solved to convergence before the first tick,
             :func:`~qpretarget.retarget.feet.initial_soles`) instead of the robot's reference
@@ -98,6 +102,7 @@ class StepSettings:
     toe_rise: float = 0.02
     toe_pitch: float = 0.6
     toe_time: float = 0.4
+    restep: float = 0.05
 
     def __post_init__(self) -> None:
         """Validate.
@@ -194,6 +199,7 @@ class KinematicStepper:
         self._lift: dict[str, tuple[float, pin.SE3]] = {}
         self._toe_down: set[str] = set()
         self._toe_armed: set[str] = set()
+        self._restep: set[str] = set()
         self._started = False
 
     def __repr__(self) -> str:
@@ -222,7 +228,7 @@ class KinematicStepper:
         self._since = {s: t for s in SIDES}
         self._anchor = {s: soles[s].copy() for s in SIDES}
         self._landing, self._target, self._pivot, self._lift = {}, {}, {}, {}
-        self._toe_down, self._toe_armed = set(), set()
+        self._toe_down, self._toe_armed, self._restep = set(), set(), set()
         for side, foot in (human_foot or {}).items():
             if foot is not None:
                 yaw0 = _yaw_of(soles[side].rotation)
@@ -240,6 +246,7 @@ class KinematicStepper:
         human_foot: Mapping[str, tuple[float, np.ndarray] | None],
         flight: bool | None = None,
         toe_rise: Mapping[str, float] | None = None,
+        moved: Mapping[str, float] | None = None,
     ) -> StepCommand:
         """Advance every foot by one tick.
 
@@ -255,6 +262,8 @@ class KinematicStepper:
                 Only then may both robot feet leave the ground.
             toe_rise: side -> rise of the person's ankle above its stance height, scaled [m]
                 (heel off the ground: toe-off; ``None``: no toe-offs).
+            moved: side -> how far the person's foot moved since touch-down, scaled [m]
+                (re-steps beyond ``restep``; ``None``: none).
 
         Returns:
             The :class:`StepCommand` of this tick.
@@ -275,10 +284,13 @@ class KinematicStepper:
             heel_up = st.toe_off and side in self.toes and rise > st.toe_rise
             if state == "stance":
                 settled = t - self._since[side] >= st.min_stance
-                if up and (other_state in ("stance", "toe_off") or flight) and settled:
+                restep = not up and (moved or {}).get(side, 0.0) > st.restep
+                if (up or restep) and (other_state in ("stance", "toe_off") or flight) and settled:
                     self._enter(t, side, "swing")
                     self._lift[side] = (t, soles[side].copy())
                     self._pivot.pop(side, None)
+                    if restep:
+                        self._restep.add(side)
                 elif not heel_up and rise <= 0.5 * st.toe_rise:
                     self._toe_armed.add(side)
                 if (
@@ -341,7 +353,10 @@ class KinematicStepper:
                         self._anchor[side] = anchor
                         anchors[side] = anchor
             elif state == "swing":
-                if not up:
+                if side in self._restep and not up and t - self._since[side] < st.lift_time:
+                    pass  # a re-step is lifted lift_time before it goes down
+                elif not up:
+                    self._restep.discard(side)
                     self._enter(t, side, "landing")
                     d = desired[side]
                     p = np.array([d.translation[0], d.translation[1], self.ground])
