@@ -191,3 +191,27 @@ def test_second_clip_teapot_gestures(g1, mocap):
     qi = g1.joint_q_index
     assert np.all(traj.q[:, qi] >= g1.q_min[qi] - 1e-9)
     assert np.all(traj.q[:, qi] <= g1.q_max[qi] + 1e-9)
+
+
+def test_drink_at_the_sensor_rate(g1, mocap):
+    """Issue 23's rate: the first second of CMU 14_37 at 30 Hz (``make-cloud``'s rendering:
+    full Kinect V2 resolution, 5 mm noise, 5 % outliers, calibration lead-in), shipped config.
+
+    Measured: worst arm segment 10.0 deg (left upper arm; 9.9 / 5.5 / 7.2 deg the others),
+    every frame ok (over 3 s: 10.4 deg, docs/point_clouds.md, ``scripts/bench_cloud.py``).
+    Bound: the issue's 12 deg; the failures it guards against are above it: 26 deg without
+    the joint-centre estimate, 45 deg without the calibration posture term, 12.2 deg without
+    the personalised surface.
+    """
+    from qpretarget.cloud.measures import longest_run_above
+    from qpretarget.cloud.render import clip_cloud_sequence
+
+    syn, poser = clip_cloud_sequence(mocap / CLIP, rate=30.0, duration=1.0)
+    traj, results = CloudRetargeter(CloudConfig.from_yaml(CONFIG), robot=g1).run(syn.sequence)
+    err = arm_direction_errors(g1, traj.q, poser, syn.q)
+    assert err.max() <= ACCEPTANCE_DEG, np.round(err.max(axis=0), 1)
+    assert longest_run_above(err, syn.sequence.t, 45.0) == 0.0
+    assert all(r.status == "ok" for r in results)
+    qi = g1.joint_q_index
+    assert np.all(traj.q[:, qi] >= g1.q_min[qi] - 1e-9)
+    assert np.all(traj.q[:, qi] <= g1.q_max[qi] + 1e-9)
