@@ -70,6 +70,8 @@ class FootTargets:
         #: key-point) or the first sample's (it has none, as G1: the foot yaw and the pivots
         #: were never measured then).
         self.toe_length: dict[str, float] = {}
+        #: side -> the person's foot pitch at the first sample (standing) [rad].
+        self.pitch0: dict[str, float] = {}
 
     def start(self, kp: Mapping[str, np.ndarray], soles: Mapping[str, pin.SE3]) -> None:
         """Anchor the person's feet where they are and measure both stance widths."""
@@ -90,6 +92,9 @@ class FootTargets:
                 length = float(np.linalg.norm(np.asarray(toe) - np.asarray(ankle)))
             if length and math.isfinite(length) and length > 0:
                 self.toe_length[side] = float(length)
+            pitch = self.foot_pitch(side, kp)
+            if pitch is not None:
+                self.pitch0[side] = pitch
         psi = yaw_of(soles["left"].rotation[:, 0])
         lateral = np.array([-math.sin(psi), math.cos(psi), 0.0])
         self.width_r = float(lateral @ (soles["left"].translation - soles["right"].translation))
@@ -189,6 +194,37 @@ class FootTargets:
         out[:2] = sole[:2] - d * (1.0 - r / n)
         return out
 
+    def foot_pitch(self, side: str, kp: Mapping[str, np.ndarray]) -> float | None:
+        """Elevation of the person's ankle -> toe vector [rad] (toe up positive)."""
+        toe, ankle = kp.get(f"{side}_toe"), kp.get(f"{side}_ankle")
+        if toe is None or ankle is None:
+            return None
+        d = np.asarray(toe, float) - np.asarray(ankle, float)
+        pitch = math.atan2(float(d[2]), math.hypot(float(d[0]), float(d[1])))
+        return pitch if math.isfinite(pitch) else None
+
+    def pitched(
+        self, side: str, sole: pin.SE3, kp: Mapping[str, np.ndarray], ground: float
+    ) -> pin.SE3:
+        r"""A swing sole turned about its y axis like the person's foot, high enough.
+
+        The person's foot pitch change since the first sample, :math:`\Delta\theta`, weighted
+        by :math:`w = \mathrm{clip}((z - z_g - 0.05) / 0.15, 0, 1)` of the sole's height over
+        the ground: flat within 5 cm of the floor (lift-off, landing), the person's pitch from
+        20 cm up (a kick points the foot up: a flat sole there folds the knee to its limit and
+        the ankle pitch to its -0.87 rad limit, the foot stopping at 0.66 of the kick height).
+        """
+        pitch, pitch0 = self.foot_pitch(side, kp), self.pitch0.get(side)
+        if pitch is None or pitch0 is None:
+            return sole
+        w = min(1.0, max(0.0, (float(sole.translation[2]) - ground - 0.05) / 0.15))
+        theta = -w * max(0.0, pitch - pitch0)
+        if abs(theta) < 1e-12:
+            return sole
+        c, s_ = math.cos(theta), math.sin(theta)
+        Ry = np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
+        return pin.SE3(sole.rotation @ Ry, sole.translation.copy())
+
     def orient(
         self,
         scaled: Mapping[str, np.ndarray],
@@ -244,7 +280,7 @@ class FootTargets:
             if h is not None and math.isfinite(h):
                 p[2] = ground + self.leg_scale * h
             p = self.reachable(side, p, d.rotation, scaled.get(f"{side}_hip"))
-            desired[side] = pin.SE3(d.rotation, p)
+            desired[side] = self.pitched(side, pin.SE3(d.rotation, p), kp, ground)
         return desired
 
 

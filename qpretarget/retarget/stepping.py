@@ -386,7 +386,7 @@ class KinematicStepper:
             if state == "swing":
                 d = desired[side]
                 z = max(float(d.translation[2]), self.ground + st.clearance)
-                target = _flat(_yaw_of(d.rotation), np.array([*d.translation[:2], z]))
+                target = pin.SE3(d.rotation.copy(), np.array([*d.translation[:2], z]))
                 start = self._lift.get(side)
                 if start is not None:
                     # Blend from where the sole left the ground (no step in the target).
