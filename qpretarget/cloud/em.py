@@ -1161,8 +1161,7 @@ class CloudRetargeter:
         J6 = T.joint_jacobians()
         E = est.Px - est.P1[:, None] * posed.points
         Hqq, bq = T.normal_equations(posed, J6, est.P1, E)
-        Hqe, Hee, be = T.centre_normal_equations(posed, J6, est.P1, E)
-        Hqe, Hee, be = Hqe @ U, U.T @ Hee @ U, U.T @ be
+        Hqe, Hee, be = T.centre_normal_equations(posed, J6, est.P1, E, basis=U)
         qp.H[:nv, :nv] = Hqq
         qp.H[:nv, nv:] = Hqe
         qp.H[nv:, :nv] = Hqe.T

@@ -826,7 +826,12 @@ class Template:
         return out.reshape(len(self.used_joints), 3, 3 * self.n_centres)
 
     def centre_normal_equations(
-        self, posed: PosedTemplate, J6: np.ndarray, P1: np.ndarray, E: np.ndarray
+        self,
+        posed: PosedTemplate,
+        J6: np.ndarray,
+        P1: np.ndarray,
+        E: np.ndarray,
+        basis: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r"""Blocks of the Gauss-Newton system in the centre offsets (rigid template).
 
@@ -836,14 +841,19 @@ class Template:
         :math:`H_{ee} = \sum_j w_j D_j^\top D_j`, :math:`b_e = \sum_j D_j^\top f_j`,
         :math:`H_{qe} = \sum_j (w_j J_{j,lin} - [c_j]_\times J_{j,ang})^\top D_j`.
         LBS points count with their own joint only (an approximation; the step is checked).
+        With ``basis`` U (3C, c) the offsets are :math:`U x` and the blocks are those of x:
+        :math:`U^\top H_{ee} U`, :math:`H_{qe} U`, :math:`U^\top b_e` (D projected first).
         """
         D = self.centre_jacobian_blocks(posed)
+        if basis is not None:
+            D = D @ basis
         W = _moment_columns(P1, posed.offsets, E)
         sums = self._group_sums(W[:, [0, 1, 2, 3, 13, 14, 15]], posed.index)
         w0, c, f = sums[:, 0], sums[:, 1:4], sums[:, 4:7]
         A = w0[:, None, None] * J6[:, :3] - np.matmul(skew_batch(c), J6[:, 3:])  # (J, 3, nv)
         H_qe = np.einsum("jan,jac->nc", A, D)
-        H_ee = np.einsum("j,jac,jad->cd", w0, D, D)
+        Dw = D * w0[:, None, None]
+        H_ee = Dw.reshape(-1, D.shape[2]).T @ D.reshape(-1, D.shape[2])
         b_e = np.einsum("jac,ja->c", D, f)
         return H_qe, H_ee, b_e
 
