@@ -34,6 +34,10 @@ FOOT_YAW_RANGE = 0.8
 
 _OTHER = {"left": "right", "right": "left"}
 
+#: The width of a step is measured across the feet's mean heading while their yaws differ by
+#: at most this [rad], else across the standing sole's.
+STRIDE_MEAN_YAW = 0.5
+
 
 class FootTargets:
     """The person's feet -> robot swing-sole targets, for one run.
@@ -148,16 +152,18 @@ class FootTargets:
             self._last_yaw[side] = yaw_of(d)
         return self._last_yaw.get(side), ratio >= 0.9
 
-    def stride(self, side: str, stance: pin.SE3, human: np.ndarray) -> np.ndarray:
+    def stride(
+        self, side: str, stance: pin.SE3, human: np.ndarray, heading: float | None = None
+    ) -> np.ndarray:
         r"""Robot ankle-to-ankle vector of a step from the person's, ``human`` (swing - stance).
 
-        Scaled by :math:`s` and turned by the calibration heading; in the stance sole's heading
-        frame the forward part is kept, the lateral part is the robot's reference stance width
-        plus :math:`s` times the person's change of lateral distance since calibration, at
-        least 70 % of the reference width (feet never cross).
+        Scaled by :math:`s` and turned by the calibration heading; in the frame of ``heading``
+        (default: the stance sole's yaw) the forward part is kept, the lateral part is the
+        robot's reference stance width plus :math:`s` times the person's change of lateral
+        distance since calibration, at least 70 % of the reference width (feet never cross).
         """
         d = self.leg_scale * (self.calibration.rotation @ human)
-        psi = yaw_of(stance.rotation[:, 0])
+        psi = yaw_of(stance.rotation[:, 0]) if heading is None else heading
         c, s_ = math.cos(psi), math.sin(psi)
         fwd, lat = c * d[0] + s_ * d[1], -s_ * d[0] + c * d[1]
         sign = 1.0 if side == "left" else -1.0
@@ -248,7 +254,8 @@ class FootTargets:
                 dpsi = yaw - cal.human_foot_yaw[s]
                 base = waist_dyaw()
                 off = math.atan2(math.sin(dpsi - base), math.cos(dpsi - base))
-                dpsi = base + max(-FOOT_YAW_RANGE, min(FOOT_YAW_RANGE, off))
+                off = max(-FOOT_YAW_RANGE, min(FOOT_YAW_RANGE, off))
+                dpsi = base + off
                 R = rot_z(dpsi) @ feet.sole_ref[s].rotation
                 desired[s] = pin.SE3(R, desired[s].translation)
         return desired, human_foot
@@ -265,7 +272,12 @@ class FootTargets:
     ) -> dict[str, pin.SE3]:
         """Place the swing soles (see the module docstring).
 
-        Stride beside a standing foot, the person's foot height, within the leg's reach.
+        Stride beside a standing foot, the person's foot height, within the leg's reach. The
+        stride's width is measured across the mean heading of the two soles when they point
+        within :data:`STRIDE_MEAN_YAW` of each other (a toed-out standing sole alone turned
+        every step's width towards its side: the walk-stop's feet drifted 5 cm sideways), else
+        across the standing sole's (feet turned apart, a karate stance: the mean heading
+        twisted the legs).
         """
         feet = self.feet
         for side, d in desired.items():
@@ -273,7 +285,15 @@ class FootTargets:
             other = _OTHER[side]
             a, b = kp.get(f"{side}_ankle"), self.human_anchor.get(other)
             if standing == (other,) and a is not None and b is not None:
-                ankle = feet.ankle_of(other, soles[other]) + self.stride(side, soles[other], a - b)
+                # Width across the feet's mean heading when they point within
+                # STRIDE_MEAN_YAW of each other (a toed-out standing sole alone turned every
+                # step's width towards its side: the walk-stop's feet drifted 5 cm), else
+                # across the standing sole's (feet turned apart: a karate stance).
+                y1, y2 = yaw_of(soles[other].rotation[:, 0]), yaw_of(d.rotation[:, 0])
+                gap = math.atan2(math.sin(y2 - y1), math.cos(y2 - y1))
+                heading = y1 + 0.5 * gap if abs(gap) <= STRIDE_MEAN_YAW else y1
+                step = self.stride(side, soles[other], a - b, heading)
+                ankle = feet.ankle_of(other, soles[other]) + step
                 if np.all(np.isfinite(ankle)):
                     p[:2] = (ankle + d.rotation @ feet.ankle_to_sole[side])[:2]
             h = heights.get(side)
