@@ -155,6 +155,9 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
         """Register this module's rows (from stacked row ``row``) with the compiled kernel."""
         return False
 
+    def kernel_detached(self) -> None:
+        """The compiled kernel stopped: from the next tick this module runs its Python code."""
+
     def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
         """Called with the applied velocity once a tick is done (e.g. to remember it)."""
 

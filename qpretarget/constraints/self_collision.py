@@ -174,6 +174,10 @@ class DistanceDamper(Constraint):
         #: Time of the last tick's collision block [s]: distances, trust region, rows and the
         #: prediction of the next distances.
         self.last_time = 0.0
+        # The compiled kernel's damper (tick, id) once its rows are compiled, else None; the
+        # box is registered first (the two share the tick's distances).
+        self._kd: tuple[Any, int] | None = None
+        self._kd_new: tuple[Any, int] | None = None
 
     # ------------------------------------------------------------------ setup
     def _setup_rows(self, robot: RobotModel) -> None:
@@ -225,6 +229,8 @@ class DistanceDamper(Constraint):
     def reset(self, state: RobotState) -> None:
         if self.model is not None:
             self.model.reset()  # fresh geometry data: a run from reset repeats to the bit
+            if self._kd is not None:
+                self._kd[0].damper_reset(self._kd[1], self.model.gdata)
         self._fp_state = None
         self._scale.fill(1.0)
         self._sqrt_scale.fill(1.0)
@@ -237,8 +243,66 @@ class DistanceDamper(Constraint):
         self._slot_pair.fill(-1)
         self._slots_key = b""
 
+    # ------------------------------------------------------------------ compiled kernel
+    def _kernel_damper(self, tick: Any) -> int | None:
+        """This damper in the kernel ``tick`` (created once per tick object), or ``None``."""
+        m = self.model
+        if self.disarms_rows or m is None or m._kernel is None or self._disabled_rows():
+            return None
+        if self._kd_new is not None and self._kd_new[0] is tick:
+            return self._kd_new[1]
+        form = {"gain_per_tick": 0, "gain": 1}.get(self.gain_form, 2)
+        kid = tick.add_damper(
+            m.gmodel, m.gdata, m.distances, np.ascontiguousarray(m._pair_lever, dtype=float),
+            np.ascontiguousarray(m._support, dtype=float), m._ga.tolist(), m._gb.tolist(),
+            np.ascontiguousarray(self.safety, dtype=float),
+            np.ascontiguousarray(self._step0, dtype=float), m.broad_phase, m.hysteresis,
+            m.rank_margin, self.d_i, self.d_s, form, self.gain_value, self.recovery_speed,
+            -1.0 if self.trust_region is None else self.trust_region, self.trust_gap,
+            MIN_TRUST_SCALE, self.n_rows, self._direct, self._nearest or 0,
+        )  # fmt: skip
+        self._kd_new = (tick, int(kid))
+        return int(kid)
+
+    def _disabled_rows(self) -> bool:
+        """``True`` when the module contributes nothing (a subclass with nothing to check)."""
+        return False
+
+    def compile_bounds_into(self, tick: Any) -> bool:
+        """The trust-region box, computed in the kernel with the distances of the tick."""
+        kid = self._kernel_damper(tick)
+        if kid is None:
+            return False
+        tick.add_damper_bounds(kid, self.name)
+        return True
+
+    def compile_rows_into(self, tick: Any, row: int) -> bool:
+        """Broad phase, coal distances, rows, trust region and prediction in the kernel."""
+        kid = self._kernel_damper(tick)
+        if kid is None:
+            return False
+        tick.add_damper_rows(kid, row)
+        self._kd = (tick, kid)
+        return True
+
+    def kernel_detached(self) -> None:
+        """The kernel stopped (an error): the Python code takes over from a fresh broad phase."""
+        self._kd = None
+        if self.model is not None:
+            self.model.invalidate()
+
+    def _kernel_state(self) -> tuple[Any, ...]:
+        """The compiled damper's active pairs, row pairs, row gradients, violations' inputs."""
+        assert self._kd is not None
+        return tuple(self._kd[0].damper_state(self._kd[1]))
+
     def after_step(self, state: RobotState, v: np.ndarray, dt: float) -> None:
         """Remember the first-order prediction of the active pairs' next distances."""
+        if self._kd is not None:
+            tick, kid = self._kd
+            tick.damper_after_step(kid, np.ascontiguousarray(v, dtype=float), dt)
+            self.last_time = float(tick.damper_last_time(kid))
+            return
         model = self.model
         if self.trust_region is None or model is None or self._row_pairs.size == 0:
             return
@@ -398,7 +462,11 @@ class DistanceDamper(Constraint):
     def violations(self) -> dict[str, float]:
         """Pairs closer than their safety distance at the last tick: ``"a/b"`` -> depth [m]."""
         out = {}
-        for p, g in zip(self._last_pairs.tolist(), self._gap.tolist(), strict=True):
+        last_pairs, gap = self._last_pairs, self._gap
+        if self._kd is not None:
+            st = self._kernel_state()
+            last_pairs, gap = st[3], st[4].ravel()
+        for p, g in zip(last_pairs.tolist(), gap.tolist(), strict=True):
             if g < 0:
                 a, b = self.pairs[p]
                 out[f"{a}/{b}"] = -g
@@ -415,11 +483,16 @@ class DistanceDamper(Constraint):
             (lower bounds :math:`\ge d_i` for the others); gradient rows of the pairs with a QP
             row this tick, zero for the others.
         """
-        self._update(state)
         model = self.model
         assert model is not None
         grad = self._grad
         grad.fill(0.0)
+        if self._kd is not None:  # the kernel's tick (it computed this state's distances)
+            _, row_pairs, grad_act = self._kernel_state()[:3]
+            if row_pairs.size:
+                grad[row_pairs] = grad_act
+            return model.distances.copy(), grad
+        self._update(state)
         if self._row_pairs.size:
             grad[self._row_pairs] = self._grad_act
         return model.distances.copy(), grad
@@ -687,6 +760,9 @@ class SelfCollision(DistanceDamper):
     def reset(self, state: RobotState) -> None:
         if not self.disabled:
             super().reset(state)
+
+    def _disabled_rows(self) -> bool:
+        return self.disabled
 
     def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
         if self.disabled:

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -141,6 +142,7 @@ class SupportPolygon(Constraint):
         self._N = np.zeros((self.n_rows, 2))
         self._o = np.zeros(self.n_rows)
         self._n_edges = 0
+        self._nk = np.zeros(1, dtype=np.int64)  # the edge count, for the compiled rows
 
     def link(self, constraints: Sequence[Constraint]) -> None:
         """Find the controller's ``contacts`` constraint (called once the controller is built).
@@ -183,6 +185,7 @@ class SupportPolygon(Constraint):
         self._N[...] = 0.0
         self._o[...] = 0.0
         self._n_edges = 0
+        self._nk[0] = 0
         self.vertices = convex_hull_2d(corners[:, :2]) if len(corners) else np.zeros((0, 2))
         if self.contacts is not None:
             self._seen_version = self.contacts.version
@@ -217,6 +220,7 @@ class SupportPolygon(Constraint):
         self._N[:k] = normals
         self._o[:k] = offsets
         self._n_edges = k
+        self._nk[0] = k
         self._C[k:] = 0.0  # unused rows stay inactive until the next polygon
         self._u[k:] = np.inf
 
@@ -246,6 +250,22 @@ class SupportPolygon(Constraint):
             self.update_polygon(state)
 
     # ------------------------------------------------------------------ per tick
+    def compile_rows_into(self, tick: Any, row: int) -> bool:
+        """The same rows in the kernel; the hull stays here (recomputed on contact changes).
+
+        The kernel compares the contacts' ``version`` with the one this hull was built from
+        and calls :meth:`_kernel_sync` when they differ (a new anchor, a new contact set).
+        """
+        tick.add_polygon(
+            self, self.contacts, row, self.n_rows, self.gain, self.recovery_depth,
+            self.second_order, self._N, self._o, self._nk,
+        )  # fmt: skip
+        return True
+
+    def _kernel_sync(self) -> None:
+        """Rebuild the hull from the contacts' anchors (called by the kernel)."""
+        self.update_polygon(None)  # type: ignore[arg-type]  # the contacts give the corners
+
     def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
         self._sync(state)
         k = self._n_edges

@@ -50,6 +50,8 @@ class CompiledTick:
     def __init__(self, ctrl: Controller, tick: Any, e_all: np.ndarray) -> None:
         self.ctrl = ctrl
         self.tick = tick
+        #: The kernel module (its free functions: the slack QP, DAQP).
+        self.module = kernel()
         self.e_all = e_all
         self.compiled_tasks: set[str] = set()
         self.python_rows: set[str] = set()
@@ -93,15 +95,21 @@ class CompiledTick:
             row += t.dim
         boxes = [c for c in ctrl.bound_constraints if c.has_bounds]
         # The box is merged in one place: the kernel when every box module has a compiled part.
-        probe = k.Tick(ctrl.robot.model, ctrl.state.data)
-        if boxes and all(c.compile_bounds_into(probe) for c in boxes):
-            for c in boxes:
-                c.compile_bounds_into(tick)
-                self.bound_names.append(c.name)
-            self.all_bounds = True
+        self.all_bounds = bool(boxes)
+        for c in boxes:
+            if not c.compile_bounds_into(tick):
+                self.all_bounds = False
+                break
+        if self.all_bounds:
+            self.bound_names = [c.name for c in boxes]
+        else:
+            tick.clear_bounds()
         row = 0
         for con in ctrl.row_constraints:
-            if not con.compile_rows_into(tick, row):
+            # A module with a box and rows (the trust region of a distance damper) shares the
+            # tick's distances between them: its rows are compiled only with its box.
+            shared = con.has_bounds and not self.all_bounds
+            if shared or not con.compile_rows_into(tick, row):
                 self.python_rows.add(con.name)
             row += con.n_rows
         if (

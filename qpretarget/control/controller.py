@@ -422,6 +422,8 @@ class Controller:
             except Exception as exc:  # a kernel error never stops the loop: Python from now on
                 self.compiled = None
                 self.compiled_reason = f"kernel error at tick {self.tick}: {exc!r}"
+                for con in self.constraints:
+                    con.kernel_detached()
                 self._notes.append(
                     f"tick {self.tick}: the compiled kernel failed ({exc!r}); every module runs "
                     "its Python code from now on (a bug to report)."

@@ -83,6 +83,9 @@ class Augmentation(Strategy):
         self._soft_group = np.concatenate(group) if group else np.zeros(0, dtype=int)
         self._slot_rows = np.zeros(0, dtype=int)  # stacked row of each used slot, last tick
         self._slot_group = np.zeros(0, dtype=int)
+        self._soft_idx64 = self._soft_idx.astype(np.int64)
+        self._row_group = np.full(self.n_rows, -1, dtype=int)  # soft constraint of each row
+        self._row_group[self._soft_idx] = self._soft_group
         self._Hv = np.zeros((self.nv, self.nv))
         self._gv = np.zeros(self.nv)
         self._allocate_slots(min(self._soft_idx.size, self.INITIAL_SLOTS))
@@ -97,6 +100,7 @@ class Augmentation(Strategy):
         p.lb[nv:] = 0.0
         p.ub[nv:] = 0.0
         self._slot_rows = self._slot_rows[:0]
+        self._slot_buf = np.zeros(max(k, 1), dtype=np.int64)  # the compiled path's slot rows
 
     def reset(self) -> None:
         """Drop the warm start and the slack slots grown since.
@@ -124,7 +128,7 @@ class Augmentation(Strategy):
                 p = self._problem
                 tp.compiled.copy_constraints(p.C, p.l, p.u, p.lb, p.ub)
                 return p
-            return self._with_slacks(tp, H, self._gv)
+            return self._with_slacks_compiled(tp, H, self._gv)
         self._weighted_rows(tp)
         self._hessian(tp, H)
         if not self._soft_idx.size:
@@ -241,6 +245,24 @@ class Augmentation(Strategy):
         p.ub[:nv] = tp.ub
         self._slot_rows = rows
         self._slot_group = self._soft_group[play]
+        return p
+
+    def _with_slacks_compiled(self, tp: TickProblem, H: np.ndarray, g: np.ndarray) -> QPProblem:
+        """:meth:`_with_slacks` in the kernel: the same QP, slots in row order."""
+        k_mod = tp.compiled.module
+        buf = self._slot_buf
+        n_last = self._slot_rows.size
+        if n_last and self._slot_rows.base is not buf:  # last tick's rows from the Python path
+            buf[:n_last] = self._slot_rows
+        args = (H, g, tp.C, tp.l, tp.u, tp.lb, tp.ub, self._soft_idx64, self._soft_w)
+        p = self._problem
+        k = k_mod.slack_qp(*args, p.H, p.g, p.C, p.l, p.u, p.lb, p.ub, buf, n_last)
+        if k < 0:  # more soft rows in play than slots: grow the QP once (as the Python path)
+            self._allocate_slots(min(self._soft_idx.size, max(2 * self._n_slots, -k)))
+            p, buf = self._problem, self._slot_buf
+            k = k_mod.slack_qp(*args, p.H, p.g, p.C, p.l, p.u, p.lb, p.ub, buf, 0)
+        self._slot_rows = buf[:k]
+        self._slot_group = self._row_group[self._slot_rows]
         return p
 
     def _slacks(self, x: np.ndarray) -> dict[str, float]:

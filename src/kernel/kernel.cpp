@@ -41,6 +41,8 @@
 
 #include <dlfcn.h>
 
+#include <chrono>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -187,14 +189,15 @@ struct PostureTaskK : TaskK {
 struct BoundsK {
   std::string name;
   virtual ~BoundsK() = default;
-  virtual void compute(const Eigen::VectorXd &q, double dt, Eigen::VectorXd &lb, Eigen::VectorXd &ub) = 0;
+  // Writes the module's box; false: no box this tick (skipped by the merge, as a Python None).
+  virtual bool compute(const Eigen::VectorXd &q, double dt, Eigen::VectorXd &lb, Eigen::VectorXd &ub) = 0;
 };
 
 struct JointLimitsK : BoundsK {
   std::vector<int> qi, vi;
   Eigen::VectorXd lo, hi;
   double gain = 0.9;
-  void compute(const Eigen::VectorXd &q, double dt, Eigen::VectorXd &lb, Eigen::VectorXd &ub) override {
+  bool compute(const Eigen::VectorXd &q, double dt, Eigen::VectorXd &lb, Eigen::VectorXd &ub) override {
     lb.setConstant(-INF);
     ub.setConstant(INF);
     double k = gain / dt;
@@ -203,14 +206,16 @@ struct JointLimitsK : BoundsK {
       lb[vi[j]] = k * (lo[j] - qj);
       ub[vi[j]] = k * (hi[j] - qj);
     }
+    return true;
   }
 };
 
 struct ConstBoundsK : BoundsK {
   Eigen::VectorXd lo, hi;
-  void compute(const Eigen::VectorXd &, double, Eigen::VectorXd &lb, Eigen::VectorXd &ub) override {
+  bool compute(const Eigen::VectorXd &, double, Eigen::VectorXd &lb, Eigen::VectorXd &ub) override {
     lb = lo;
     ub = hi;
+    return true;
   }
 };
 
@@ -276,6 +281,440 @@ struct ContactsK {
     }
   }
 };
+
+
+static double sq(double x) { return x * x; }
+
+// ---------------------------------------------------------------- distance damper (self-collision)
+// constraints/self_collision.py DistanceDamper on collision/model.py CollisionModel, per tick:
+// the broad phase (temporal-coherence lower bounds d - sum_j lever_pj |dq_j|), coal's exact
+// distances of the candidates (capped rows: only what the K smallest gaps need), the rows
+// -dd/dq v <= max(rate (d - d_s), -recovery) (Faverjon-Tournassoud velocity damper, CRAC eq. 22-27
+// distances), the trust-region box |v_j| dt <= sqrt(2 s_p eps / r_pj) with its adaptation from
+// the last tick's first-order prediction, and that prediction after the step. Same operations, in
+// the same order, as the Python modules; the Python object keeps its configuration and reads the
+// results through this object.
+struct DamperK : BoundsK {
+  const Model *m = nullptr;
+  Data *d = nullptr;
+  pinocchio::GeometryModel *gm = nullptr;
+  pinocchio::GeometryData *gd = nullptr;
+  nb::object keep_gm, keep_gd;
+  int P = 0, nv = 0, row = 0, n_rows = 0;
+  RowMat pair_lever, support, step0;  // (P, nv), (nbodies, nv), (P, nv)
+  std::vector<int> ga, gb;
+  Eigen::VectorXd safety;
+  bool broad_phase = true, direct = true, has_nearest = false;
+  int nearest = 0;
+  double hysteresis = 0.0, rank_margin = 0.005, d_i = 0.1, recovery = 0.1;
+  int rate_form = 0;  // 0 gain_per_tick, 1 gain, 2 xi
+  double rate_value = 0.0, d_s = 0.0;
+  double trust = -1.0, trust_gap = 0.0, min_scale = 1.0 / 4096;
+  // state
+  Buf dist;  // CollisionModel.distances (Python's array, updated in place)
+  Eigen::VectorXd q_last, dq, scale, sqrt_scale, pred, thr;
+  bool fresh = true, scaled = false, thr_valid = false;
+  double thr_influence = std::numeric_limits<double>::quiet_NaN(), cut = INF;
+  std::vector<char> flags, thr_flags;
+  std::vector<int> idx, act, row_pairs, pred_pairs, last_rows, last_pairs, slot, slot_pair, slot_rows;
+  RowMat wpa, wn, grad;  // witness points / normals of `act` (k, 3); row gradients (k, nv)
+  Eigen::VectorXd gap_rows;
+  double last_time = 0.0, update_time = 0.0;
+  std::vector<int> slots_key;
+  bool updated = false;
+
+  void set_geometry(nb::handle pgm, nb::handle pgd) {
+    gm = extract_ref<pinocchio::GeometryModel>(pgm, "pinocchio.GeometryModel");
+    gd = extract_ref<pinocchio::GeometryData>(pgd, "pinocchio.GeometryData");
+    keep_gm = nb::borrow(pgm);
+    keep_gd = nb::borrow(pgd);
+  }
+
+  void reset() {
+    fresh = true;
+    thr_valid = false;
+    scale.setOnes(P);
+    sqrt_scale.setOnes(P);
+    scaled = false;
+    pred_pairs.clear();
+    cut = INF;
+    flags.assign(P, 1);
+    last_rows.clear();
+    last_pairs.clear();
+    row_pairs.clear();
+    slot.assign(P, -1);
+    slot_pair.assign(n_rows, -1);
+    slots_key.clear();
+    slot_rows.clear();
+    grad.resize(0, nv);
+    gap_rows.resize(0);
+  }
+
+  double rate(double dt) const {
+    if (rate_form == 0) return rate_value / dt;
+    if (rate_form == 1) return rate_value;
+    return rate_value / (d_i - d_s);
+  }
+
+  // coal distances of the flagged pairs (index order), into dist; witness data by pair
+  RowMat wpa_all, wn_all;
+  void exact(bool placed) {
+    if (!placed) pinocchio::updateGeometryPlacements(*m, *d, *gm, *gd);
+    for (int i : idx) {
+      const coal::DistanceResult &r = pinocchio::computeDistance(*gm, *gd, size_t(i));
+      dist.p[i] = r.min_distance;
+      for (int k = 0; k < 3; ++k) {
+        wpa_all(i, k) = r.nearest_points[0][k];
+        wn_all(i, k) = r.normal[k];
+      }
+    }
+  }
+  void set_flags(const std::vector<char> &need) {
+    flags = need;
+    idx.clear();
+    for (int i = 0; i < P; ++i)
+      if (flags[i]) idx.push_back(i);
+  }
+
+  // CollisionModel.update + DistanceDamper._update
+  void update(const Eigen::VectorXd &q) {
+    double influence = d_i;
+    double *lb = dist.p;
+    bool full = fresh || !broad_phase || !std::isfinite(influence);
+    bool ranked = has_nearest && !full;
+    // candidates
+    if (full) {
+      for (int i = 0; i < P; ++i) lb[i] = -INF;
+      fresh = false;
+    } else {
+      dq.resize(nv);
+      pinocchio::difference(*m, q_last, q, dq);
+      dq = dq.cwiseAbs();
+      Eigen::VectorXd dec = pair_lever * dq;
+      for (int i = 0; i < P; ++i) lb[i] -= dec[i];
+    }
+    q_last = q;
+    std::vector<char> cand(P);
+    if (hysteresis > 0) {
+      if (!thr_valid || thr_influence != influence || thr_flags != flags) {
+        thr.setConstant(P, influence);
+        for (int i = 0; i < P; ++i)
+          if (flags[i]) thr[i] += hysteresis;
+        thr_influence = influence;
+        thr_flags = flags;
+        thr_valid = true;
+      }
+      for (int i = 0; i < P; ++i) cand[i] = lb[i] < thr[i];
+    } else {
+      for (int i = 0; i < P; ++i) cand[i] = lb[i] < influence;
+    }
+    std::vector<char> need(P);
+    for (int i = 0; i < P; ++i) need[i] = ranked ? (cand[i] && (lb[i] - safety[i] < cut)) : cand[i];
+    set_flags(need);
+    if (!idx.empty()) exact(false);
+    if (ranked) {
+      int found = 0;
+      bool more = false;
+      for (int i : idx) found += (dist.p[i] - safety[i] < cut) && (dist.p[i] < influence);
+      for (int i = 0; i < P; ++i) more = more || (cand[i] && !need[i]);
+      if (found < nearest && more) {
+        bool placed = !idx.empty();
+        set_flags(cand);
+        if (!idx.empty()) exact(placed);
+      }
+    }
+    act.clear();
+    for (int i : idx)
+      if (dist.p[i] < influence) act.push_back(i);
+    if (has_nearest) {
+      std::vector<double> g;
+      for (int i : act) g.push_back(dist.p[i] - safety[i]);
+      if (int(g.size()) >= nearest) {
+        std::nth_element(g.begin(), g.begin() + (nearest - 1), g.end());
+        cut = g[nearest - 1] + rank_margin;
+      } else {
+        cut = INF;
+      }
+    }
+    // the pairs that get a row (the closest n_rows when capped)
+    std::vector<int> sel(act.size());
+    for (size_t j = 0; j < act.size(); ++j) sel[j] = int(j);
+    if (!direct && !act.empty() && int(act.size()) > n_rows) {
+      std::vector<double> gap(act.size());
+      for (size_t j = 0; j < act.size(); ++j) gap[j] = dist.p[act[j]] - safety[act[j]];
+      std::stable_sort(sel.begin(), sel.end(), [&](int a, int b) { return gap[a] < gap[b]; });
+      sel.resize(n_rows);
+      std::sort(sel.begin(), sel.end());
+    }
+    row_pairs.clear();
+    for (int j : sel) row_pairs.push_back(act[j]);
+    // gradients n'(J_b(p) - J_a(p)) = (c' J^W) o (S_b - S_a), c = [n; p_a x n]
+    int k = int(row_pairs.size());
+    grad.setZero(k, nv);
+    for (int r = 0; r < k; ++r) {
+      int pi = row_pairs[r];
+      double px = wpa_all(pi, 0), py = wpa_all(pi, 1), pz = wpa_all(pi, 2);
+      double nx = wn_all(pi, 0), ny = wn_all(pi, 1), nz = wn_all(pi, 2);
+      double c[6] = {nx, ny, nz, py * nz - pz * ny, pz * nx - px * nz, px * ny - py * nx};
+      for (int j = 0; j < nv; ++j) {
+        double mask = support(gb[pi], j) - support(ga[pi], j);
+        if (mask == 0.0) continue;
+        double acc = 0.0;
+        for (int t = 0; t < 6; ++t) acc += c[t] * d->J(t, j);
+        grad(r, j) = acc * mask;
+      }
+    }
+    // trust region: adapt to last tick's prediction error
+    if (!pred_pairs.empty()) {
+      std::vector<int> good;
+      for (size_t j = 0; j < pred_pairs.size(); ++j) {
+        int pi = pred_pairs[j];
+        double err = dist.p[pi] - pred[j];
+        double tol = trust;
+        if (trust_gap > 0) tol = std::max(tol, trust_gap * (pred[j] - safety[pi]));
+        if (err < -tol) {
+          double f = std::min(std::max(sq(tol / err), 1.0 / 64), 0.5);
+          scale[pi] = std::max(scale[pi] * f, min_scale);
+          scaled = true;
+        } else {
+          good.push_back(pi);
+        }
+      }
+      if (scaled) {
+        for (int pi : good) scale[pi] = std::min(scale[pi] * 1.25, 1.0);
+        sqrt_scale = scale.cwiseSqrt();
+        scaled = scale.minCoeff() < 1.0;
+      }
+      pred_pairs.clear();
+    }
+    updated = true;
+  }
+
+  // the trust-region box (compute_bounds): called first in the tick, so it also updates
+  bool compute(const Eigen::VectorXd &q, double dt, Eigen::VectorXd &lb, Eigen::VectorXd &ub) override {
+    auto t0 = std::chrono::steady_clock::now();
+    update(q);
+    auto t1 = std::chrono::steady_clock::now();
+    update_time = std::chrono::duration<double>(t1 - t0).count();
+    if (trust <= 0 || row_pairs.empty()) return false;
+    ub.setConstant(INF);
+    for (int pi : row_pairs) {
+      double f = 1.0;
+      if (trust_gap > 0) f = std::sqrt(std::max(1.0, trust_gap * (dist.p[pi] - safety[pi]) / trust));
+      double sc = scaled ? sqrt_scale[pi] : 1.0;
+      for (int j = 0; j < nv; ++j) {
+        double st = step0(pi, j);
+        if (trust_gap > 0) st = st * f;
+        if (scaled) st = st * sc;
+        ub[j] = std::min(ub[j], st);
+      }
+    }
+    ub *= 1.0 / dt;
+    lb = -ub;
+    return true;
+  }
+
+  // QP rows of this tick's pairs (capped rows keep their slot while they stay among the closest)
+  const std::vector<int> &slots() {
+    if (row_pairs == slots_key) return slot_rows;
+    std::vector<char> keep(P, 0);
+    for (int pi : row_pairs) keep[pi] = 1;
+    for (int r = 0; r < n_rows; ++r) {
+      int owner = slot_pair[r];
+      if (owner >= 0 && !keep[owner]) {
+        slot[owner] = -1;
+        slot_pair[r] = -1;
+      }
+    }
+    int free_r = 0;
+    for (int pi : row_pairs) {
+      if (slot[pi] >= 0) continue;
+      while (slot_pair[free_r] >= 0) ++free_r;
+      slot[pi] = free_r;
+      slot_pair[free_r] = pi;
+    }
+    slots_key = row_pairs;
+    slot_rows.clear();
+    for (int pi : row_pairs) slot_rows.push_back(slot[pi]);
+    return slot_rows;
+  }
+
+  void rows(double dt, MapRM &C, double *u) {
+    auto t0 = std::chrono::steady_clock::now();
+    if (!updated) update(Eigen::Map<const Eigen::VectorXd>(q_cur, m->nq));
+    std::vector<int> rws = row_pairs;
+    if (!direct) rws = slots();
+    if (!last_rows.empty() && last_rows != rws) {
+      for (int r : last_rows) {
+        C.row(row + r).setZero();
+        u[row + r] = INF;
+      }
+    }
+    double rt = rate(dt);
+    gap_rows.resize(row_pairs.size());
+    for (size_t j = 0; j < row_pairs.size(); ++j) {
+      int pi = row_pairs[j], r = rws[j];
+      double gp = dist.p[pi] - safety[pi];
+      gap_rows[j] = gp;
+      C.row(row + r) = -grad.row(int(j));
+      u[row + r] = std::max(gp * rt, -recovery);
+    }
+    last_rows = rws;
+    last_pairs = row_pairs;
+    updated = false;
+    last_time = update_time + std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  const double *q_cur = nullptr;
+
+  void after_step(CArr v, double dt) {
+    if (trust <= 0 || row_pairs.empty()) return;
+    pred_pairs = row_pairs;
+    pred.resize(row_pairs.size());
+    for (size_t j = 0; j < row_pairs.size(); ++j) {
+      double acc = 0.0;
+      for (int t = 0; t < nv; ++t) acc += grad(int(j), t) * (v.data()[t] * dt);
+      pred[j] = dist.p[row_pairs[j]] + acc;
+    }
+  }
+
+  // read-outs for the Python object (violations, CRAC distances and gradients, witnesses)
+  nb::tuple state_arrays() {
+    auto vec = [](const std::vector<int> &x) {
+      int64_t *p = new int64_t[x.size() ? x.size() : 1];
+      for (size_t i = 0; i < x.size(); ++i) p[i] = x[i];
+      nb::capsule owner(p, [](void *q) noexcept { delete[] (int64_t *)q; });
+      return nb::ndarray<nb::numpy, int64_t, nb::ndim<1>>(p, {x.size()}, owner);
+    };
+    auto mat = [](const RowMat &x) {
+      double *p = new double[x.size() ? x.size() : 1];
+      std::copy(x.data(), x.data() + x.size(), p);
+      nb::capsule owner(p, [](void *q) noexcept { delete[] (double *)q; });
+      return nb::ndarray<nb::numpy, double, nb::ndim<2>>(p, {size_t(x.rows()), size_t(x.cols())}, owner);
+    };
+    RowMat wa(act.size(), 3), wnn(act.size(), 3);
+    for (size_t j = 0; j < act.size(); ++j) {
+      wa.row(int(j)) = wpa_all.row(act[j]);
+      wnn.row(int(j)) = wn_all.row(act[j]);
+    }
+    RowMat gr = gap_rows.transpose();
+    return nb::make_tuple(vec(act), vec(row_pairs), mat(grad), vec(last_pairs), mat(gr), mat(wa), mat(wnn),
+                          last_time);
+  }
+};
+
+
+// ---------------------------------------------------------------- support polygon rows
+// constraints/support_polygon.py: n_k' J_com,xy v <= gamma/dt (o_k - n_k' c_xy) (recovery_depth
+// further in outside an edge) - dt/2 n_k' cdd_xy (second order). The hull lives in the Python
+// object (recomputed when the contacts change); the kernel asks it to resync when the contacts'
+// version moved, then reads its edge arrays.
+struct PolygonK {
+  int row = 0, n_rows = 0;
+  double gain = 1.0, recovery_depth = 0.0;
+  bool second_order = true;
+  nb::object py, contacts;  // the Python constraint and its contacts (or None)
+  Buf N, o, nk;             // (n_rows, 2), (n_rows,), (1,) edge count (nk: owner only)
+  int64_t *nk_i = nullptr;
+  PyObject *s_version, *s_seen, *s_sync;
+  PolygonK() {
+    s_version = PyUnicode_InternFromString("version");
+    s_seen = PyUnicode_InternFromString("_seen_version");
+    s_sync = PyUnicode_InternFromString("_kernel_sync");
+  }
+  void compute(const Model &m, Data &d, Data &vd, bool &vd_ready, const Eigen::VectorXd &q,
+               const Eigen::VectorXd &v, double dt, MapRM &C, double *u) {
+    if (!contacts.is_none()) {
+      nb::object ver = nb::steal(PyObject_GetAttr(contacts.ptr(), s_version));
+      nb::object seen = nb::steal(PyObject_GetAttr(py.ptr(), s_seen));
+      if (!ver.is_valid() || !seen.is_valid()) throw nb::python_error();
+      int eq = PyObject_RichCompareBool(ver.ptr(), seen.ptr(), Py_EQ);
+      if (eq < 0) throw nb::python_error();
+      if (!eq) {
+        nb::object r = nb::steal(PyObject_CallMethodNoArgs(py.ptr(), s_sync));
+        if (!r.is_valid()) throw nb::python_error();
+      }
+    }
+    int k = int(nk_i[0]);
+    for (int r = k; r < n_rows; ++r) {
+      C.row(row + r).setZero();
+      u[row + r] = INF;
+    }
+    if (k == 0) return;
+    const auto &Jc = pinocchio::jacobianCenterOfMass(m, d, true);
+    const Eigen::Vector3d c = d.com[0];
+    Eigen::Vector2d acc = Eigen::Vector2d::Zero();
+    bool drift = second_order && !v.isZero(0.0);
+    if (drift) {
+      if (!vd_ready) {
+        pinocchio::forwardKinematics(m, vd, q, v, Eigen::VectorXd::Zero(m.nv));
+        vd_ready = true;
+      }
+      pinocchio::centerOfMass(m, vd, pinocchio::ACCELERATION, false);
+      acc = vd.acom[0].head<2>();
+    }
+    double g = gain / dt;
+    for (int e = 0; e < k; ++e) {
+      double nx = N.p[2 * e], ny = N.p[2 * e + 1];
+      C.row(row + e) = nx * Jc.row(0) + ny * Jc.row(1);
+      double dist = o.p[e] - (nx * c[0] + ny * c[1]);
+      if (dist < 0.0) dist -= recovery_depth;
+      double ue = g * dist;
+      if (drift) ue -= (0.5 * dt) * (nx * acc[0] + ny * acc[1]);
+      u[row + e] = ue;
+    }
+  }
+};
+
+
+// ---------------------------------------------------------------- augmentation with slacks
+// strategies/augmentation.py Augmentation._with_slacks: the QP x = (v, s) with one slack slot per
+// soft row in play this tick (a finite side), in row order: C_i v - s_i <= u_i (or + s_i >= l_i
+// for a row bounded from below only), cost w s + eps/2 s^2 (eps on the slots' diagonal, set when
+// the slots were allocated). Returns the number of slots used, or -k when k exceed the slots
+// allocated (nothing written: the caller grows the QP and calls again). `slot_rows` holds last
+// tick's rows on entry (their slack entries are cleared) and this tick's on exit.
+static int slack_qp(CArr Hv, CArr gv, CArr C, CArr l, CArr u, CArr lb, CArr ub, IArr soft_idx,
+                    CArr soft_w, Arr pH, Arr pg, Arr pC, Arr pl, Arr pu, Arr plb, Arr pub,
+                    IArr slot_rows, int n_last) {
+  int nv = int(gv.size());
+  int n = int(pg.size());
+  int n_slots = n - nv;
+  int nin = int(l.size());
+  const int64_t *si = soft_idx.data();
+  int ns = int(soft_idx.size());
+  const double *lp = l.data(), *up = u.data();
+  int k = 0;
+  for (int j = 0; j < ns; ++j)
+    if (std::isfinite(up[si[j]]) || std::isfinite(lp[si[j]])) ++k;
+  if (k > n_slots) return -k;
+  MapRM PC(pC.data(), nin, n);
+  int64_t *sr = slot_rows.data();
+  for (int j = 0; j < n_last; ++j) PC(sr[j], nv + j) = 0.0;
+  Eigen::Map<const RowMat> Cm(C.data(), nin, nv);
+  PC.leftCols(nv) = Cm;
+  MapRM PH(pH.data(), n, n);
+  PH.topLeftCorner(nv, nv) = Eigen::Map<const RowMat>(Hv.data(), nv, nv);
+  double *g = pg.data(), *pubp = pub.data(), *plbp = plb.data();
+  std::copy(gv.data(), gv.data() + nv, g);
+  std::fill(g + nv, g + n, 0.0);
+  std::fill(pubp + nv, pubp + n, 0.0);
+  int t = 0;
+  for (int j = 0; j < ns; ++j) {
+    int r = int(si[j]);
+    bool upf = std::isfinite(up[r]);
+    if (!upf && !std::isfinite(lp[r])) continue;
+    PC(r, nv + t) = upf ? -1.0 : 1.0;
+    g[nv + t] = soft_w.data()[j];
+    pubp[nv + t] = INF;
+    sr[t] = r;
+    ++t;
+  }
+  std::copy(lp, lp + nin, pl.data());
+  std::copy(up, up + nin, pu.data());
+  std::copy(lb.data(), lb.data() + nv, plbp);
+  std::copy(ub.data(), ub.data() + nv, pubp);
+  return k;
+}
 
 // ---------------------------------------------------------------- DAQP (C API of the installed daqp)
 extern "C" {
@@ -463,8 +902,11 @@ struct Tick {
   Data vdata;
   nb::object keep_model, keep_data;
   std::vector<std::unique_ptr<TaskK>> tasks;
-  std::vector<std::unique_ptr<BoundsK>> bounds;  // merge order (most important first)
+  std::vector<std::shared_ptr<BoundsK>> bounds;  // merge order (most important first)
+  std::vector<std::shared_ptr<DamperK>> dampers;  // distance dampers (self-collision)
+  std::vector<std::shared_ptr<DamperK>> damper_rows_;  // those whose rows the kernel writes
   std::vector<ContactsK> contacts;
+  std::vector<PolygonK> polygons;
   Buf J_all, v_all, e_all, C, l, u, lb, ub;
   int m_tasks = 0, n_rows = 0;
   Eigen::VectorXd q, v, blo, bhi, nlb, nub;
@@ -529,7 +971,7 @@ struct Tick {
     tasks.push_back(std::move(t));
   }
   void add_joint_limits(std::string name, std::vector<int> qi, std::vector<int> vi, CArr lo, CArr hi, double gain) {
-    auto b = std::make_unique<JointLimitsK>();
+    auto b = std::make_shared<JointLimitsK>();
     b->name = name;
     b->qi = qi;
     b->vi = vi;
@@ -539,7 +981,7 @@ struct Tick {
     bounds.push_back(std::move(b));
   }
   void add_const_bounds(std::string name, CArr lo, CArr hi) {
-    auto b = std::make_unique<ConstBoundsK>();
+    auto b = std::make_shared<ConstBoundsK>();
     b->name = name;
     b->lo = Eigen::Map<const Eigen::VectorXd>(lo.data(), lo.size());
     b->hi = Eigen::Map<const Eigen::VectorXd>(hi.data(), hi.size());
@@ -561,6 +1003,88 @@ struct Tick {
     contacts.push_back(std::move(c));
   }
 
+  void add_polygon(nb::object py, nb::object contacts_, int row, int n_rows, double gain,
+                   double recovery_depth, bool second_order, Arr N_, Arr o_, IArr nk_) {
+    PolygonK pk;
+    pk.py = py;
+    pk.contacts = contacts_;
+    pk.row = row;
+    pk.n_rows = n_rows;
+    pk.gain = gain;
+    pk.recovery_depth = recovery_depth;
+    pk.second_order = second_order;
+    pk.N = Buf(N_);
+    pk.o = Buf(o_);
+    pk.nk.owner = nb::find(nk_);
+    pk.nk.p = nullptr;
+    pk.nk_i = nk_.data();
+    polygons.push_back(std::move(pk));
+  }
+  int add_damper(nb::handle gmodel, nb::handle gdata, Arr distances, CArr pair_lever, CArr support,
+                 std::vector<int> ga, std::vector<int> gb, CArr safety, CArr step0, bool broad_phase,
+                 double hysteresis, double rank_margin, double d_i, double d_s, int rate_form,
+                 double rate_value, double recovery, double trust, double trust_gap,
+                 double min_scale, int n_rows, bool direct, int nearest) {
+    auto dk = std::make_shared<DamperK>();
+    dk->m = model;
+    dk->d = data;
+    dk->set_geometry(gmodel, gdata);
+    dk->P = int(distances.size());
+    dk->nv = model->nv;
+    dk->dist = Buf(distances);
+    int P = dk->P, nv = dk->nv;
+    dk->pair_lever = Eigen::Map<const RowMat>(pair_lever.data(), P, nv);
+    dk->support = Eigen::Map<const RowMat>(support.data(), support.size() / nv, nv);
+    dk->step0 = Eigen::Map<const RowMat>(step0.data(), P, nv);
+    dk->ga = ga;
+    dk->gb = gb;
+    dk->safety = Eigen::Map<const Eigen::VectorXd>(safety.data(), P);
+    dk->broad_phase = broad_phase;
+    dk->hysteresis = hysteresis;
+    dk->rank_margin = rank_margin;
+    dk->d_i = d_i;
+    dk->d_s = d_s;
+    dk->rate_form = rate_form;
+    dk->rate_value = rate_value;
+    dk->recovery = recovery;
+    dk->trust = trust;
+    dk->trust_gap = trust_gap;
+    dk->min_scale = min_scale;
+    dk->n_rows = n_rows;
+    dk->direct = direct;
+    dk->has_nearest = nearest > 0;
+    dk->nearest = nearest;
+    dk->q_last = Eigen::VectorXd::Zero(model->nq);
+    dk->wpa_all.setZero(P, 3);
+    dk->wn_all.setZero(P, 3);
+    dk->name = "damper";
+    dk->reset();
+    dampers.push_back(dk);
+    return int(dampers.size()) - 1;
+  }
+  void add_damper_bounds(int id, std::string name) {
+    dampers.at(id)->name = name;
+    bounds.push_back(dampers.at(id));
+  }
+  void add_damper_rows(int id, int row) {
+    dampers.at(id)->row = row;
+    damper_rows_.push_back(dampers.at(id));
+  }
+  void clear_bounds() { bounds.clear(); }
+  void damper_reset(int id, nb::handle gdata) {
+    auto &dk = dampers.at(id);
+    dk->set_geometry(dk->keep_gm, gdata);
+    dk->reset();
+    MapRM Cm(C.p, n_rows, model->nv);
+    for (int r = 0; r < dk->n_rows; ++r) {  // a reset run is the same as a fresh one
+      Cm.row(dk->row + r).setZero();
+      u.p[dk->row + r] = INF;
+    }
+  }
+  void damper_after_step(int id, CArr v, double dt) { dampers.at(id)->after_step(v, dt); }
+  nb::tuple damper_state(int id) { return dampers.at(id)->state_arrays(); }
+  double damper_last_time(int id) { return dampers.at(id)->last_time; }
+
   // Tasks, bounds (merged) and rows of this tick. Returns the amounts each bound gave
   // (NaN: nothing), one per bound module in merge order.
   std::vector<double> build(CArr q_, CArr v_, double dt) {
@@ -568,6 +1092,10 @@ struct Tick {
     Data &d = *data;
     q = Eigen::Map<const Eigen::VectorXd>(q_.data(), m.nq);
     v = Eigen::Map<const Eigen::VectorXd>(v_.data(), m.nv);
+    for (auto &dk : dampers) {
+      dk->q_cur = q.data();
+      dk->updated = false;
+    }
     MapRM J(J_all.p, m_tasks, m.nv);
     for (auto &t : tasks) {
       double *e = e_all.p + t->row;
@@ -581,6 +1109,8 @@ struct Tick {
       MapRM Cm(C.p, n_rows, m.nv);
       bool vd_ready = false;
       for (auto &c : contacts) c.compute(m, d, vdata, vd_ready, q, v, dt, Cm, l.p, u.p);
+      for (auto &pk : polygons) pk.compute(m, d, vdata, vd_ready, q, v, dt, Cm, u.p);
+      for (auto &dk : damper_rows_) dk->rows(dt, Cm, u.p);
       return gave;
     }
     MapV LB(lb.p, m.nv), UB(ub.p, m.nv);
@@ -589,11 +1119,13 @@ struct Tick {
     gave.assign(bounds.size(), std::numeric_limits<double>::quiet_NaN());
     blo.resize(m.nv);
     bhi.resize(m.nv);
+    bool first = true;
     for (size_t b = 0; b < bounds.size(); ++b) {
-      bounds[b]->compute(q, dt, blo, bhi);
-      if (b == 0) {
+      if (!bounds[b]->compute(q, dt, blo, bhi)) continue;
+      if (first) {  // the most important box goes in as it is
         LB = blo;
         UB = bhi;
+        first = false;
         continue;
       }
       double amount = -INF;
@@ -615,6 +1147,8 @@ struct Tick {
     MapRM Cm(C.p, n_rows, m.nv);
     bool vd_ready = false;
     for (auto &c : contacts) c.compute(m, d, vdata, vd_ready, q, v, dt, Cm, l.p, u.p);
+    for (auto &pk : polygons) pk.compute(m, d, vdata, vd_ready, q, v, dt, Cm, u.p);
+    for (auto &dk : damper_rows_) dk->rows(dt, Cm, u.p);
     return gave;
   }
 
@@ -681,6 +1215,7 @@ NB_MODULE(_kernel, m) {
   m.def("daqp_error", &daqp_error);
   m.def("daqp_defaults", &daqp_defaults);
   m.def("daqp_solve", &daqp_solve);
+  m.def("slack_qp", &slack_qp);
   m.def("geometry_distances", &geometry_distances);
   nb::class_<Tick>(m, "Tick")
       .def(nb::init<nb::handle, nb::handle>())
@@ -691,6 +1226,15 @@ NB_MODULE(_kernel, m) {
       .def("add_joint_limits", &Tick::add_joint_limits)
       .def("add_const_bounds", &Tick::add_const_bounds)
       .def("add_contacts", &Tick::add_contacts)
+      .def("add_polygon", &Tick::add_polygon)
+      .def("add_damper", &Tick::add_damper)
+      .def("add_damper_bounds", &Tick::add_damper_bounds)
+      .def("add_damper_rows", &Tick::add_damper_rows)
+      .def("clear_bounds", &Tick::clear_bounds)
+      .def("damper_reset", &Tick::damper_reset)
+      .def("damper_after_step", &Tick::damper_after_step)
+      .def("damper_state", &Tick::damper_state)
+      .def("damper_last_time", &Tick::damper_last_time)
       .def("build", &Tick::build)
       .def("hessian", &Tick::hessian)
       .def("copy_constraints", &Tick::copy_constraints)
