@@ -59,6 +59,8 @@ class CompiledTick:
         self.bound_names: list[str] = []
         self._blocks: list[CostBlock] = []
         self._slices: list[slice] = []
+        self._box_index: dict[str, int] = {}
+        self._has_box: list[float] = []
         self._python: list[tuple[int, Task]] = []  # tasks without a compiled part (fixed)
         self._ramping: dict[int, Task] = {}  # compiled tasks ramping back after a missing target
 
@@ -94,21 +96,21 @@ class CompiledTick:
                 self._python.append((len(self._blocks) - 1, t))
             row += t.dim
         boxes = [c for c in ctrl.bound_constraints if c.has_bounds]
-        # The box is merged in one place: the kernel when every box module has a compiled part.
-        self.all_bounds = bool(boxes)
+        # Box modules with a compiled part compute their box in the kernel; the kernel also
+        # merges the box when every box module has one, else Python merges them in order.
+        self._box_index = {}
         for c in boxes:
-            if not c.compile_bounds_into(tick):
-                self.all_bounds = False
-                break
+            if c.compile_bounds_into(tick):
+                self._box_index[c.name] = len(self._box_index)
+        self.all_bounds = bool(boxes) and len(self._box_index) == len(boxes)
         if self.all_bounds:
             self.bound_names = [c.name for c in boxes]
-        else:
-            tick.clear_bounds()
+        tick.set_merge(self.all_bounds)
         row = 0
         for con in ctrl.row_constraints:
             # A module with a box and rows (the trust region of a distance damper) shares the
             # tick's distances between them: its rows are compiled only with its box.
-            shared = con.has_bounds and not self.all_bounds
+            shared = con.has_bounds and con.name not in self._box_index
             if shared or not con.compile_rows_into(tick, row):
                 self.python_rows.add(con.name)
             row += con.n_rows
@@ -160,7 +162,21 @@ class CompiledTick:
         gave = None
         if self.all_bounds:
             gave = {n: float(x) for n, x in zip(self.bound_names, g, strict=True) if x == x}
+        else:
+            self._has_box = g
         return (blocks if out is None else out), gave
+
+    def computes_box(self, con: Any) -> bool:
+        """``True`` when the kernel computes the box of ``con``."""
+        return con.name in self._box_index
+
+    def box(self, con: Any) -> tuple[np.ndarray, np.ndarray] | None:
+        """This tick's box of ``con`` as the kernel computed it (``None``: no box this tick)."""
+        i = self._box_index[con.name]
+        if self._has_box[i] != 1.0:
+            return None
+        lo, hi = self.tick.box(i)
+        return lo, hi
 
     def note_missing(self, task: Task) -> None:
         """``task`` got a missing (NaN) target: its rows come from Python until it recovers."""

@@ -432,7 +432,7 @@ class Controller:
             blocks, gave = built
             t1 = perf()
             timings["tasks"] = t1 - t0
-            bound_gave = self._merge_bounds(dt) if gave is None else gave
+            bound_gave = self._merge_bounds(dt, ct) if gave is None else gave
             t2 = perf()
             timings["bounds"] = t2 - t1
             self._stack_rows(dt, only=ct.python_rows)
@@ -457,8 +457,12 @@ class Controller:
             self.regularization.damping, self.tick, self._J_all, self._v_all, bound_gave,
         )  # fmt: skip
 
-    def _merge_bounds(self, dt: float) -> dict[str, float]:
+    def _merge_bounds(self, dt: float, ct: CompiledTick | None = None) -> dict[str, float]:
         """Merge every constraint's box into ``self._lb, self._ub``, most important first.
+
+        Args:
+            dt: tick length [s].
+            ct: the compiled tick, whose modules' boxes the kernel already computed.
 
         Returns:
             Constraint name -> how much its (less important) box gave to the ones before it.
@@ -469,7 +473,10 @@ class Controller:
         gave: dict[str, float] = {}
         first = True
         for con in self.bound_constraints:
-            b = con.compute_bounds(self.state, dt)
+            if ct is not None and ct.computes_box(con):
+                b = ct.box(con)
+            else:
+                b = con.compute_bounds(self.state, dt)
             if b is None:
                 continue
             if first:  # the most important bounds go in as they are

@@ -188,6 +188,8 @@ struct PostureTaskK : TaskK {
 // ---------------------------------------------------------------- bounds
 struct BoundsK {
   std::string name;
+  Eigen::VectorXd lo_out, hi_out;  // the module's own box (when Python merges the box)
+  bool has_out = false;
   virtual ~BoundsK() = default;
   // Writes the module's box; false: no box this tick (skipped by the merge, as a Python None).
   virtual bool compute(const Eigen::VectorXd &q, double dt, Eigen::VectorXd &lb, Eigen::VectorXd &ub) = 0;
@@ -1087,6 +1089,22 @@ struct Tick {
 
   // Tasks, bounds (merged) and rows of this tick. Returns the amounts each bound gave
   // (NaN: nothing), one per bound module in merge order.
+  // merge: the kernel merges the box (every box module compiled). Otherwise each compiled box
+  // module's own box is computed (read with `box(i)`, merged in Python in order with the
+  // others) and the returned values are 1 (a box this tick) or NaN (none).
+  bool merge = true;
+  void set_merge(bool mg) { merge = mg; }
+  nb::tuple box(int i) {
+    auto &b = bounds.at(i);
+    auto copy = [](const Eigen::VectorXd &x) {
+      double *p = new double[x.size() ? x.size() : 1];
+      std::copy(x.data(), x.data() + x.size(), p);
+      nb::capsule owner(p, [](void *q) noexcept { delete[] (double *)q; });
+      return nb::ndarray<nb::numpy, double, nb::ndim<1>>(p, {size_t(x.size())}, owner);
+    };
+    return nb::make_tuple(copy(b->lo_out), copy(b->hi_out));
+  }
+
   std::vector<double> build(CArr q_, CArr v_, double dt) {
     const Model &m = *model;
     Data &d = *data;
@@ -1105,7 +1123,14 @@ struct Tick {
     }
     // box bounds, most important first; a less important one gives (Controller._merge_bounds)
     gave.assign(bounds.size(), std::numeric_limits<double>::quiet_NaN());
-    if (bounds.empty()) {  // the box is merged in Python (a module without a compiled part)
+    if (!merge || bounds.empty()) {  // the box is merged in Python (a module without a compiled part)
+      for (size_t b = 0; b < bounds.size(); ++b) {
+        auto &bk = bounds[b];
+        bk->lo_out.resize(m.nv);
+        bk->hi_out.resize(m.nv);
+        bk->has_out = bk->compute(q, dt, bk->lo_out, bk->hi_out);
+        if (bk->has_out) gave[b] = 1.0;
+      }
       MapRM Cm(C.p, n_rows, m.nv);
       bool vd_ready = false;
       for (auto &c : contacts) c.compute(m, d, vdata, vd_ready, q, v, dt, Cm, l.p, u.p);
@@ -1231,6 +1256,8 @@ NB_MODULE(_kernel, m) {
       .def("add_damper_bounds", &Tick::add_damper_bounds)
       .def("add_damper_rows", &Tick::add_damper_rows)
       .def("clear_bounds", &Tick::clear_bounds)
+      .def("set_merge", &Tick::set_merge)
+      .def("box", &Tick::box)
       .def("damper_reset", &Tick::damper_reset)
       .def("damper_after_step", &Tick::damper_after_step)
       .def("damper_state", &Tick::damper_state)
