@@ -5,7 +5,10 @@ G1 posed by known joint motion, rendered at full Kinect V2 resolution 2.3 m away
 points, voxel-averaged and subsampled to 2,500), 5 mm noise, 5 % outliers; every frame is
 tracked from the previous ones (AR prediction) as in a live run. Prints median / p95 / p99 time
 per frame and iterations, with the machine and versions (``--profile N``: the E-step's share and
-the N costliest functions; the run is then profiled, and its times are slower).
+the N costliest functions; the run is then profiled, and its times are slower; ``--stages``: CPU
+milliseconds per frame spent in each stage of the fit and in the kd-tree searches, measured by
+timers around those functions, which add about 1 ms per frame; the 3-D searches include the
+cloud normals' own).
 
 With ``--clip`` the human model follows a mocap clip at 30 Hz instead (the issue's figure: CMU
 14_37 drink, 2,500 cloud points), fitted with the shipped ``configs/cloud_g1.yaml`` (calibration
@@ -13,6 +16,7 @@ and joint-centre learning on); the calibration frame is not counted.
 
     python scripts/bench_cloud.py [--frames 60] [--json out.json]
     python scripts/bench_cloud.py --clip ../shared/data/mocap/cmu_14_37_drink_soda.bvh
+    python scripts/bench_cloud.py --clip ../shared/data/mocap/cmu_14_37_drink_soda.bvh --stages
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ import os
 import platform
 import pstats
 import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -38,6 +44,7 @@ def main() -> None:
     ap.add_argument("--config", default=None, help="cloud config (with --clip; default shipped)")
     ap.add_argument("--profile", type=int, default=0, help="print the N costliest functions")
     ap.add_argument("--rate", type=float, default=30.0, help="clip frames per second (--clip)")
+    ap.add_argument("--stages", action="store_true", help="CPU time per stage of the fit")
     args = ap.parse_args()
 
     import proxsuite
@@ -82,13 +89,18 @@ def main() -> None:
         template = Template(g1, n_points=5000, meshes=meshes, link_density_exponent=0.5)
         rt = CloudRetargeter(cfg, robot=g1, template=template)
     template_s = time.perf_counter() - t0
+    stage_ms: dict[str, float] = {}
+    if args.stages:
+        _time_stages(rt, stage_ms)
     prof = cProfile.Profile() if args.profile else None  # the profiler slows the run down
     if prof is not None:
         prof.enable()
     cpu = [time.thread_time()]  # CPU time of this thread per frame: what other load can't add
 
-    def tick(_i: int, _r: object) -> None:
+    def tick(i: int, _r: object) -> None:
         cpu.append(time.thread_time())
+        if i == 0:
+            stage_ms.clear()  # the calibration frame is not counted
 
     traj, results = rt.run(syn.sequence, callback=tick)
     if prof is not None:
@@ -143,12 +155,68 @@ def main() -> None:
     }
     if args.clip:
         out.update(arms)
+    if args.stages:
+        n = max(len(results) - 1, 1)
+        out["stages_cpu_ms_per_frame"] = {
+            k: round(1000.0 * v / n, 2) for k, v in sorted(stage_ms.items(), key=lambda kv: -kv[1])
+        }
     print(json.dumps(out, indent=2))
     if prof is not None:
         stats.sort_stats("tottime").print_stats(args.profile)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=2)
+
+
+def _time_stages(rt: Any, acc: dict[str, float]) -> None:
+    """Wrap the fit's stages (and scipy's kd-tree searches) with CPU timers adding into ``acc``.
+
+    Nested: a stage's time includes the searches and E-steps inside it.
+    """
+    import scipy.spatial
+
+    import qpretarget.cloud.em as em_module
+    import qpretarget.cloud.io as io_module
+
+    def timed(fn: Callable[..., Any], label: str) -> Callable[..., Any]:
+        def wrapper(*a: Any, **k: Any) -> Any:
+            t0 = time.thread_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                acc[label] = acc.get(label, 0.0) + time.thread_time() - t0
+
+        return wrapper
+
+    em_stage = rt._em_stage
+
+    def stage(name: str, *a: Any, **k: Any) -> Any:
+        return timed(em_stage, f"stage {name}")(name, *a, **k)
+
+    rt._em_stage = stage
+    for attr, label in (
+        ("_prepare", "cloud preparation (crop, voxels, normals)"),
+        ("_centre_stage", "stage centres"),
+        ("final_nll", "final NLL"),
+        ("_active", "visible template points"),
+        ("_solve_step", "M-step QPs (with priors, rows)"),
+        ("_line_search", "line searches"),
+    ):
+        setattr(rt, attr, timed(getattr(rt, attr), label))
+    em_module.e_step = timed(em_module.e_step, "E-steps (with their searches)")
+    io_module.estimate_normals = timed(io_module.estimate_normals, "cloud normals")
+    em_module.estimate_normals = io_module.estimate_normals
+
+    class TimedTree(scipy.spatial.cKDTree):
+        def query(self, *a: Any, **k: Any) -> Any:
+            t0 = time.thread_time()
+            try:
+                return super().query(*a, **k)
+            finally:
+                label = f"kd-tree searches {self.m}-D"
+                acc[label] = acc.get(label, 0.0) + time.thread_time() - t0
+
+    scipy.spatial.cKDTree = TimedTree
 
 
 if __name__ == "__main__":
