@@ -384,19 +384,20 @@ _POSTERIOR_MATRIX: list[Any] = []
 def _posterior_matrix(pairs: np.ndarray, post: np.ndarray, Mtot: int) -> Any:
     """(N, Mtot) CSR matrix of the posteriors ``post`` (N, k) at columns ``pairs`` (N, k).
 
-    Kept pairs are the same array from one E-step to the next: the matrix's structure is
-    then reused and only its values replaced (scipy's constructor checks cost 50-70 us).
+    Kept pairs come back from one E-step to the next: the matrix's structure is then reused
+    and only its values replaced (scipy's constructor checks cost 50-70 us; comparing the
+    pairs with a copy of the last ones, 15 us, also catches pairs changed in place).
     """
     from scipy.sparse import csr_matrix
 
     c = _POSTERIOR_MATRIX
-    if c and c[0] is pairs and c[1] == Mtot:
+    if c and c[1] == Mtot and c[0].shape == pairs.shape and np.array_equal(c[0], pairs):
         P = c[2]
         P.data[:] = post.reshape(-1)
         return P
     N, k = pairs.shape
     P = csr_matrix((post.reshape(-1), pairs.reshape(-1), np.arange(0, N * k + 1, k)), (N, Mtot))
-    c[:] = [pairs, Mtot, P]
+    c[:] = [pairs.copy(), Mtot, P]
     return P
 
 
@@ -404,10 +405,10 @@ _SCALED_NORMALS: list[Any] = []
 
 
 def _scaled_normals(Sn: Any, scale: float) -> np.ndarray:
-    """``scale * Sn``, the same array while the same normals and scale come back."""
+    """``scale * Sn``, the same array while the same normals (compared by value) come back."""
     c = _SCALED_NORMALS
-    if not (c and c[0] is Sn and c[1] == scale):
-        c[:] = [Sn, scale, scale * np.asarray(Sn, float)]
+    if not (c and c[1] == scale and _same_array(c[0], Sn)):
+        c[:] = [np.array(Sn, float), scale, scale * np.asarray(Sn, float)]
     out: np.ndarray = c[2]
     return out
 
@@ -420,13 +421,21 @@ def _cloud_terms(
     A frame's E-steps share its cloud (and its scaled normals, :class:`_Neighbours`).
     """
     c = _CLOUD_TERMS
-    if c and c[0] is S and c[1] is Sn:
+    if c and _same_array(c[0], S) and _same_array(c[1], Sn):
         return c[2], c[3], c[4]
     cols = np.hstack([np.ones((len(S), 1)), S] + ([Sn] if Sn is not None else []))
     s2 = np.einsum("na,na->n", S, S)
     n2 = np.einsum("na,na->n", Sn, Sn) if Sn is not None else None
-    c[:] = [S, Sn, cols, s2, n2]
+    c[:] = [S.copy(), None if Sn is None else Sn.copy(), cols, s2, n2]
     return cols, s2, n2
+
+
+def _same_array(kept: np.ndarray | None, a: Any) -> bool:
+    """Whether ``a`` equals the ``kept`` copy (shape and values; both None counts)."""
+    if kept is None or a is None:
+        return kept is None and a is None
+    a = np.asarray(a)
+    return bool(kept.shape == a.shape and np.array_equal(kept, a))
 
 
 def visible_from(

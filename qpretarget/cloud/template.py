@@ -650,7 +650,13 @@ class Template:
         coordinates change only with :meth:`set_scales` (a new array each time).
         """
         c = getattr(self, "_subset_cache", None)
-        if c is None or c[0] is not index or c[1] is not self.local:
+        if (
+            c is None
+            or c[1] is not self.local
+            or c[0].shape != index.shape
+            or not np.array_equal(c[0], index)
+        ):
+            index = np.array(index)
             c = (index, self.local, self.joint[index], self.local[index], self.normals0[index])
             self._subset_cache = c
         return c[2], c[3], c[4]
@@ -693,13 +699,18 @@ class Template:
         """
         g = self._group
         cache = getattr(self, "_group_matrix", None)
-        if cache is None or cache[0] is not g or cache[1] is not index:
+        if (
+            cache is None
+            or not (cache[0] is g or np.array_equal(cache[0], g))  # set_scales makes a new g
+            or (cache[1] is None) != (index is None)
+            or (index is not None and not np.array_equal(cache[1], index))
+        ):
             from scipy.sparse import csr_matrix
 
             gi = g if index is None else g[index]
             M = len(gi)
             G = csr_matrix((np.ones(M), (gi, np.arange(M))), shape=(len(self.used_joints), M))
-            cache = self._group_matrix = (g, index, G)
+            cache = self._group_matrix = (g, None if index is None else np.array(index), G)
         return np.asarray(cache[2] @ W)
 
     def normal_equations(

@@ -241,3 +241,20 @@ def test_reinitialisation_keeps_the_most_likely_fit(g1, frame):
     stages = {x.stage for x in res[1e-3].log}
     assert {"reinit-last-linear", "reinit-velocity-linear"} <= stages
     assert res[1e-3].nll <= res[0.0].nll
+
+
+def test_e_step_caches_follow_changed_inputs():
+    """The E-step keeps the last cloud's columns and the last pairs' sparse structure; inputs
+    changed in place (same arrays, new values) must not reuse them: equal to fresh copies."""
+    rng = np.random.default_rng(8)
+    S, V = rng.normal(size=(30, 3)) * 0.1, rng.normal(size=(20, 3)) * 0.1
+    active = np.ones(20, bool)
+    est = e_step(S, V, active, 0.004, 0.1, neighbors=4)
+    pairs = est.pairs.copy()
+    e_step(S, V, active, 0.004, 0.1, pairs=pairs)
+    pairs[:, 0] = (pairs[:, 0] + 1) % 20  # other (valid) pairs, same array
+    S += 0.01  # another cloud, same array
+    fresh = e_step(S.copy(), V, active, 0.004, 0.1, pairs=pairs.copy())
+    again = e_step(S, V, active, 0.004, 0.1, pairs=pairs)
+    assert again.nll == fresh.nll  # same operations on the same values: bit for bit
+    assert np.array_equal(again.P1, fresh.P1) and np.array_equal(again.Px, fresh.Px)
