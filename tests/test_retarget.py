@@ -143,8 +143,10 @@ def test_reaching_clip_end_to_end(request, config):
     # Pelvis: 13-16 mm with the former 20 self-collision pairs; with `pairs: auto` in both G1
     # whole-body configs (issue 16) it lags about 90 mm on this bend-and-scoop clip (hands
     # 62-74 mm): the person's hands pass where the robot's thighs and pelvis are, and the robot
-    # keeps them apart (docs/collisions.md, tracking cost).
-    assert s["rmse_mm"]["pelvis"] < 100 and s["rmse_mm"]["left_hand"] < 80
+    # keeps them apart (docs/collisions.md, tracking cost). Since the run starts in the person's
+    # first stance (stepping.initial_stance, issue 15) the hands follow better (46 mm) and the
+    # pelvis a little worse (106 mm; the generated `whole_body` config: 91 mm, hands 67-75).
+    assert s["rmse_mm"]["pelvis"] < 115 and s["rmse_mm"]["left_hand"] < 80
 
 
 def test_stepping_clip_end_to_end(whole_body):
