@@ -150,9 +150,14 @@ class DaqpSolver(QPSolver):
         np.maximum(lo, -BIG, out=bl[n:])
         sense = np.zeros(n + m, dtype=np.int32)
         lam = self._lam
-        if self.warm_start and lam is not None:  # hot start: last tick's active set
-            sense[:n][lam[:n] != 0.0] = 1
-            sense[n:][lam[n:][rows] != 0.0] = 1
+        if self.warm_start and lam is not None:  # hot start: last tick's active set, on the
+            # side of each multiplier's sign (DAQP: > 0 upper bound, < 0 lower: sense 1 | 2)
+            lb_ = lam[:n]
+            sense[:n][lb_ > 0.0] = 1
+            sense[:n][lb_ < 0.0] = 3
+            lr = lam[n:][rows]
+            sense[n:][lr > 0.0] = 1
+            sense[n:][lr < 0.0] = 3
         sense[bl == bu] = 5
         return np.ascontiguousarray(A, dtype=float), bu, bl, sense, rows
 

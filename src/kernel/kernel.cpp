@@ -818,11 +818,13 @@ static nb::tuple daqp_solve(Arr H, Arr g, CArr C, CArr l, CArr u, CArr lb, CArr 
     w.bu[n + r] = std::min(up[w.rows[r]], BIG);
     w.bl[n + r] = std::max(lp[w.rows[r]], -BIG);
   }
-  if (warm) {
+  if (warm) {  // active on the side of the multiplier's sign (DAQP: > 0 upper, < 0 lower)
     for (int i = 0; i < n; ++i)
-      if (lamp[i] != 0.0) w.sense[i] = 1;
-    for (int r = 0; r < m; ++r)
-      if (lamp[n + w.rows[r]] != 0.0) w.sense[n + r] = 1;
+      if (lamp[i] != 0.0) w.sense[i] = lamp[i] > 0.0 ? 1 : 3;
+    for (int r = 0; r < m; ++r) {
+      double lr = lamp[n + w.rows[r]];
+      if (lr != 0.0) w.sense[n + r] = lr > 0.0 ? 1 : 3;
+    }
   }
   for (int i = 0; i < n + m; ++i)
     if (w.bl[i] == w.bu[i]) w.sense[i] = 5;
