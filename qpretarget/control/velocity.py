@@ -100,7 +100,16 @@ class VelocityLevel(Level):
     def solve(self, tp: TickProblem) -> LevelOutcome:
         """One velocity-level solve with fallback and hold (see the module docstring)."""
         ts = time.perf_counter()
-        x, res, fb_relaxed = solve_with_fallback(self.strategy, self.fallback, tp)
+        # A compiled tick may solve and integrate in one kernel call (docs/benchmarks.md);
+        # any tick it does not finish cleanly is solved here as always.
+        fused = self.strategy.solve_fused(tp) if tp.compiled is not None else None
+        q_next: np.ndarray | None = None
+        if fused is not None:
+            res, q_next = fused
+            x = res.x
+            fb_relaxed = dict(res.slack) if res.slack else None
+        else:
+            x, res, fb_relaxed = solve_with_fallback(self.strategy, self.fallback, tp)
         # Wall time of strategy + fallback, minus the strategy's own solver time.
         self.timings["assembly"] = time.perf_counter() - ts - res.solve_time
         self.timings["solve"] = res.solve_time
@@ -142,11 +151,11 @@ class VelocityLevel(Level):
             )
             x = braking_velocity(tp)
             out.status = "held"
-        else:
+        elif q_next is None:
             # Solvers meet bounds to their tolerance; the box is cheap to meet exactly.
             np.clip(x, tp.lb, tp.ub, out=x)
         out.v_next = x
-        out.q_next = self.robot.integrate(tp.state.q, x, tp.dt)
+        out.q_next = self.robot.integrate(tp.state.q, x, tp.dt) if q_next is None else q_next
         return out
 
 

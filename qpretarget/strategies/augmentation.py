@@ -29,6 +29,7 @@ import numpy as np
 from ..problem import QPProblem
 from ..robot import RobotModel
 from ..solvers import QPSolver
+from ..solvers.daqp_ import DaqpSolver
 from .base import (
     STRATEGIES,
     SoftRows,
@@ -71,6 +72,11 @@ class Augmentation(Strategy):
         self._W_seen: np.ndarray | None = None
         self._W_is_eye = False
         self._sw_all = np.zeros(m)
+        self._fused_key: tuple[Any, ...] | None = None  # the buffers the kernel's fused call holds
+        #: Why the fused kernel call was turned off ('' while it is used when possible).
+        self.fused_error = ""
+        self._no_slots = np.zeros(1, dtype=np.int64)
+        self._slot_buf = self._no_slots
 
     def set_soft_rows(self, soft: list[SoftRows]) -> bool:
         """Slack slots for the rows of the soft constraints (module docstring)."""
@@ -141,6 +147,83 @@ class Augmentation(Strategy):
         np.negative(self._gv, out=self._gv)
         return self._with_slacks(tp, H, self._gv)
 
+    def _sqrt_weights(self, tp: TickProblem) -> np.ndarray:
+        """Square roots of the tick's stacked weights (recomputed when a weight array changes)."""
+        weights = [b.weight for b in tp.blocks]
+        if len(weights) != len(self._w_seen) or any(
+            w is not s for w, s in zip(weights, self._w_seen, strict=True)
+        ):
+            self._sw_all = np.sqrt(np.concatenate(weights))
+            self._w_seen = weights
+        return self._sw_all
+
+    def solve_fused(self, tp: TickProblem) -> tuple[StrategyResult, np.ndarray] | None:
+        """The QP of :meth:`assemble`, DAQP's solve and the integration in one kernel call.
+
+        A kernel error turns the fused call off for good (:attr:`fused_error` says why); the
+        tick and the next ones are solved by :meth:`solve`.
+        """
+        if self.fused_error:
+            return None
+        try:
+            return self._solve_fused(tp)
+        except Exception as exc:  # never stop the loop: the Python path solves from here on
+            self.fused_error = repr(exc)
+            self._fused_key = None
+            return None
+
+    def _solve_fused(self, tp: TickProblem) -> tuple[StrategyResult, np.ndarray] | None:
+        """:meth:`solve_fused` itself.
+
+        Used when the tick was compiled, ``W = I`` and the solver calls DAQP from C
+        (:meth:`DaqpSolver.fused_settings`); the same QP and the same hot start, so the same
+        solution as :meth:`solve`. ``None`` hands the tick to :meth:`solve` (more soft rows in
+        play than slack slots, a failed solve).
+        """
+        ct = tp.compiled
+        sv = self._solver
+        if ct is None or not isinstance(sv, DaqpSolver) or tp.J_all is None:
+            return None
+        settings = sv.fused_settings()
+        if settings is None or not self._is_eye(tp.W):
+            return None
+        p = self._problem
+        soft = bool(self._soft_idx.size)
+        sv.prepare(p)
+        buf = self._slot_buf if soft else self._no_slots
+        key = (p.H, sv.buffers(), buf)
+        if self._fused_key is None or any(
+            a is not b for a, b in zip(key, self._fused_key, strict=True)
+        ):
+            x, lam = sv.buffers()
+            ct.tick.set_qp(
+                p.H, p.g, p.C, p.l, p.u, p.lb, p.ub, x, lam, soft, buf,
+                self._soft_idx64 if soft else self._no_slots, self._soft_w if soft else p.g[:0],
+                settings["warm"], settings["primal_tol"], settings["dual_tol"],
+                settings["iter_limit"], settings["eps_prox"],
+            )  # fmt: skip
+            self._fused_key = key
+        n_last = self._slot_rows.size if soft else 0
+        if n_last and self._slot_rows.base is not buf:  # last tick's rows from the Python path
+            buf[:n_last] = self._slot_rows
+        q_next = np.empty(tp.state.q.size)
+        sw = self._sqrt_weights(tp)
+        k, flag, iters, ok, smax, t_solve, _ = ct.tick.fused(
+            sw, tp.damping * tp.damping, n_last, tp.dt, q_next
+        )
+        if k < 0:
+            return None  # more soft rows in play than slots: solve() grows the QP
+        if soft:
+            self._slot_rows = buf[:k]
+            self._slot_group = self._row_group[self._slot_rows]
+        if not ok:
+            return None
+        x_full = sv.buffers()[0]
+        res = StrategyResult(x_full[: self.nv].copy(), True, sv.status_text(flag), iters, t_solve)
+        if soft and smax > self.REPORT_TOLERANCE:
+            res.slack = self._slacks(x_full)
+        return res, q_next
+
     def _compiled_cost(self, tp: TickProblem, H: np.ndarray) -> bool:
         """:math:`H` and :math:`g` from the kernel when the tick was compiled (same cost).
 
@@ -149,14 +232,8 @@ class Augmentation(Strategy):
         ct = tp.compiled
         if ct is None or tp.J_all is None or not self._is_eye(tp.W):
             return False
-        weights = [b.weight for b in tp.blocks]
-        if len(weights) != len(self._w_seen) or any(
-            w is not s for w, s in zip(weights, self._w_seen, strict=True)
-        ):
-            self._sw_all = np.sqrt(np.concatenate(weights))
-            self._w_seen = weights
         g = self._gv if self._soft_idx.size else self._problem.g
-        ct.hessian(self._sw_all, tp.damping * tp.damping, H, g)
+        ct.hessian(self._sqrt_weights(tp), tp.damping * tp.damping, H, g)
         return True
 
     def _is_eye(self, W: np.ndarray) -> bool:

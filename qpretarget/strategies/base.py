@@ -134,6 +134,16 @@ class Strategy(abc.ABC):
     def solve(self, tp: TickProblem) -> StrategyResult:
         """Solve this tick."""
 
+    def solve_fused(self, tp: TickProblem) -> tuple[StrategyResult, np.ndarray] | None:
+        """Solve the tick and integrate it in one compiled call (``tp.compiled`` set).
+
+        Returns:
+            ``(result, q_next)`` with ``result.x`` already within the box, or ``None`` (the
+            default: the level solves through :meth:`solve`, as on any tick the compiled call
+            does not finish).
+        """
+        return None
+
     def reset(self) -> None:
         """Drop warm starts."""
 

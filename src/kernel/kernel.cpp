@@ -675,29 +675,22 @@ struct PolygonK {
 // the slots were allocated). Returns the number of slots used, or -k when k exceed the slots
 // allocated (nothing written: the caller grows the QP and calls again). `slot_rows` holds last
 // tick's rows on entry (their slack entries are cleared) and this tick's on exit.
-static int slack_qp(CArr Hv, CArr gv, CArr C, CArr l, CArr u, CArr lb, CArr ub, IArr soft_idx,
-                    CArr soft_w, Arr pH, Arr pg, Arr pC, Arr pl, Arr pu, Arr plb, Arr pub,
-                    IArr slot_rows, int n_last) {
-  int nv = int(gv.size());
-  int n = int(pg.size());
+static int slack_core(const double *Hv, const double *gv, const double *Cp, const double *lp,
+                      const double *up, const double *lbp, const double *ubp, int nv, int nin,
+                      const int64_t *si, int ns, const double *sw, double *pH, double *g, double *pC,
+                      double *pl, double *pu, double *plb, double *pubp, int n, int64_t *sr,
+                      int n_last) {
   int n_slots = n - nv;
-  int nin = int(l.size());
-  const int64_t *si = soft_idx.data();
-  int ns = int(soft_idx.size());
-  const double *lp = l.data(), *up = u.data();
   int k = 0;
   for (int j = 0; j < ns; ++j)
     if (std::isfinite(up[si[j]]) || std::isfinite(lp[si[j]])) ++k;
   if (k > n_slots) return -k;
-  MapRM PC(pC.data(), nin, n);
-  int64_t *sr = slot_rows.data();
+  MapRM PC(pC, nin, n);
   for (int j = 0; j < n_last; ++j) PC(sr[j], nv + j) = 0.0;
-  Eigen::Map<const RowMat> Cm(C.data(), nin, nv);
-  PC.leftCols(nv) = Cm;
-  MapRM PH(pH.data(), n, n);
-  PH.topLeftCorner(nv, nv) = Eigen::Map<const RowMat>(Hv.data(), nv, nv);
-  double *g = pg.data(), *pubp = pub.data(), *plbp = plb.data();
-  std::copy(gv.data(), gv.data() + nv, g);
+  PC.leftCols(nv) = Eigen::Map<const RowMat>(Cp, nin, nv);
+  MapRM PH(pH, n, n);
+  PH.topLeftCorner(nv, nv) = Eigen::Map<const RowMat>(Hv, nv, nv);
+  std::copy(gv, gv + nv, g);
   std::fill(g + nv, g + n, 0.0);
   std::fill(pubp + nv, pubp + n, 0.0);
   int t = 0;
@@ -706,16 +699,25 @@ static int slack_qp(CArr Hv, CArr gv, CArr C, CArr l, CArr u, CArr lb, CArr ub, 
     bool upf = std::isfinite(up[r]);
     if (!upf && !std::isfinite(lp[r])) continue;
     PC(r, nv + t) = upf ? -1.0 : 1.0;
-    g[nv + t] = soft_w.data()[j];
+    g[nv + t] = sw[j];
     pubp[nv + t] = INF;
     sr[t] = r;
     ++t;
   }
-  std::copy(lp, lp + nin, pl.data());
-  std::copy(up, up + nin, pu.data());
-  std::copy(lb.data(), lb.data() + nv, plbp);
-  std::copy(ub.data(), ub.data() + nv, pubp);
+  std::copy(lp, lp + nin, pl);
+  std::copy(up, up + nin, pu);
+  std::copy(lbp, lbp + nv, plb);
+  std::copy(ubp, ubp + nv, pubp);
   return k;
+}
+
+static int slack_qp(CArr Hv, CArr gv, CArr C, CArr l, CArr u, CArr lb, CArr ub, IArr soft_idx,
+                    CArr soft_w, Arr pH, Arr pg, Arr pC, Arr pl, Arr pu, Arr plb, Arr pub,
+                    IArr slot_rows, int n_last) {
+  return slack_core(Hv.data(), gv.data(), C.data(), l.data(), u.data(), lb.data(), ub.data(),
+                    int(gv.size()), int(l.size()), soft_idx.data(), int(soft_idx.size()), soft_w.data(),
+                    pH.data(), pg.data(), pC.data(), pl.data(), pu.data(), plb.data(), pub.data(),
+                    int(pg.size()), slot_rows.data(), n_last);
 }
 
 // ---------------------------------------------------------------- DAQP (C API of the installed daqp)
@@ -791,14 +793,17 @@ struct DaqpWork {
   std::vector<double> A, bu, bl, x, lamr;
 };
 
-static nb::tuple daqp_solve(Arr H, Arr g, CArr C, CArr l, CArr u, CArr lb, CArr ub, Arr x_out, Arr lam,
-                            bool warm, double primal_tol, double dual_tol, int iter_limit,
-                            double eps_prox) {
+struct DaqpOut {
+  int flag = 0, iters = 0;
+  bool ok = false;
+};
+
+static DaqpOut daqp_core(const double *H, const double *g, const double *Cp, const double *lp,
+                         const double *up, const double *lbp, const double *ubp, int n, int nin,
+                         double *xo, double *lamio, bool warm, double primal_tol, double dual_tol,
+                         int iter_limit, double eps_prox, bool release_gil) {
   static DaqpWork w;
   const double BIG = 1e30;
-  int n = int(g.size());
-  int nin = int(l.size());
-  const double *Cp = C.data(), *lp = l.data(), *up = u.data();
   w.rows.clear();
   for (int i = 0; i < nin; ++i)
     if (std::isfinite(lp[i]) || std::isfinite(up[i])) w.rows.push_back(i);
@@ -809,7 +814,6 @@ static nb::tuple daqp_solve(Arr H, Arr g, CArr C, CArr l, CArr u, CArr lb, CArr 
   w.bu.resize(n + m);
   w.bl.resize(n + m);
   w.sense.assign(n + m, 0);
-  const double *lbp = lb.data(), *ubp = ub.data(), *lamp = lam.data();
   for (int i = 0; i < n; ++i) {
     w.bu[i] = std::min(ubp[i], BIG);
     w.bl[i] = std::max(lbp[i], -BIG);
@@ -818,51 +822,62 @@ static nb::tuple daqp_solve(Arr H, Arr g, CArr C, CArr l, CArr u, CArr lb, CArr 
     w.bu[n + r] = std::min(up[w.rows[r]], BIG);
     w.bl[n + r] = std::max(lp[w.rows[r]], -BIG);
   }
-  if (warm) {  // active on the side of the multiplier's sign (DAQP: > 0 upper, < 0 lower)
+  if (warm) {  // the last active set, marked active (solvers/daqp_.py explains the side)
     for (int i = 0; i < n; ++i)
-      if (lamp[i] != 0.0) w.sense[i] = lamp[i] > 0.0 ? 1 : 3;
-    for (int r = 0; r < m; ++r) {
-      double lr = lamp[n + w.rows[r]];
-      if (lr != 0.0) w.sense[n + r] = lr > 0.0 ? 1 : 3;
-    }
+      if (lamio[i] != 0.0) w.sense[i] = 1;
+    for (int r = 0; r < m; ++r)
+      if (lamio[n + w.rows[r]] != 0.0) w.sense[n + r] = 1;
   }
   for (int i = 0; i < n + m; ++i)
     if (w.bl[i] == w.bu[i]) w.sense[i] = 5;
   w.x.assign(n, 0.0);
   w.lamr.assign(n + m, 0.0);
-  KDAQPProblem qp{n, n + m, n, H.data(), g.data(), w.A.data(), w.bu.data(), w.bl.data(),
-                  w.sense.data(), nullptr, 0, 0};
-  KDAQPSettings s;
-  g_daqp.defaults(&s);
-  s.primal_tol = primal_tol;
-  s.dual_tol = dual_tol;
-  s.iter_limit = iter_limit;
-  s.eps_prox = eps_prox;
+  KDAQPProblem qp{n, n + m, n, const_cast<double *>(H), const_cast<double *>(g), w.A.data(),
+                  w.bu.data(), w.bl.data(), w.sense.data(), nullptr, 0, 0};
+  KDAQPSettings st;
+  g_daqp.defaults(&st);
+  st.primal_tol = primal_tol;
+  st.dual_tol = dual_tol;
+  st.iter_limit = iter_limit;
+  st.eps_prox = eps_prox;
   KDAQPResult res;
   res.x = w.x.data();
   res.lam = w.lamr.data();
-  {
+  if (release_gil) {
     nb::gil_scoped_release release;
-    g_daqp.quadprog(&res, &qp, &s);
-  }
-  int flag = res.exitflag;
-  if (flag == -5 && eps_prox == 0.0) {  // singular H: proximal iterations (solvers/daqp_.py)
-    s.eps_prox = 1e-6;
-    g_daqp.quadprog(&res, &qp, &s);
-    flag = res.exitflag;
-  }
-  double *xo = x_out.data(), *lo = lam.data();
-  bool ok = (flag == 1 || flag == 2);
-  for (int i = 0; i < n && ok; ++i) ok = std::isfinite(w.x[i]);
-  if (ok) {
-    std::copy(w.x.begin(), w.x.end(), xo);
-    std::fill(lo, lo + n + nin, 0.0);
-    std::copy(w.lamr.begin(), w.lamr.begin() + n, lo);
-    for (int r = 0; r < m; ++r) lo[n + w.rows[r]] = w.lamr[n + r];
+    g_daqp.quadprog(&res, &qp, &st);
   } else {
-    std::fill(lo, lo + n + nin, 0.0);  // no hot start from a failed solve
+    g_daqp.quadprog(&res, &qp, &st);
   }
-  return nb::make_tuple(flag, res.iter, ok);
+  DaqpOut out;
+  out.flag = res.exitflag;
+  if (out.flag == -5 && eps_prox == 0.0) {  // singular H: proximal iterations (solvers/daqp_.py)
+    st.eps_prox = 1e-6;
+    g_daqp.quadprog(&res, &qp, &st);
+    out.flag = res.exitflag;
+  }
+  out.iters = res.iter;
+  out.ok = (out.flag == 1 || out.flag == 2);
+  for (int i = 0; i < n && out.ok; ++i) out.ok = std::isfinite(w.x[i]);
+  if (out.ok) {
+    std::copy(w.x.begin(), w.x.end(), xo);
+    std::fill(lamio, lamio + n + nin, 0.0);
+    std::copy(w.lamr.begin(), w.lamr.begin() + n, lamio);
+    for (int r = 0; r < m; ++r) lamio[n + w.rows[r]] = w.lamr[n + r];
+  } else {
+    std::fill(lamio, lamio + n + nin, 0.0);  // no hot start from a failed solve
+  }
+  return out;
+}
+
+static nb::tuple daqp_solve(Arr H, Arr g, CArr C, CArr l, CArr u, CArr lb, CArr ub, Arr x_out, Arr lam,
+                            bool warm, double primal_tol, double dual_tol, int iter_limit,
+                            double eps_prox) {
+  int n = int(g.size());
+  int nin = int(l.size());
+  DaqpOut o = daqp_core(H.data(), g.data(), C.data(), l.data(), u.data(), lb.data(), ub.data(), n, nin,
+                        x_out.data(), lam.data(), warm, primal_tol, dual_tol, iter_limit, eps_prox, true);
+  return nb::make_tuple(o.flag, o.iters, o.ok);
 }
 
 // ---------------------------------------------------------------- collision distances
@@ -1183,12 +1198,13 @@ struct Tick {
   // H = Jw' Jw + lambda^2 I and g = -Jw' rw, Jw = diag(sw) J, rw = sw .* v*, over every stacked
   // task row (compiled or not). Rows of [0 I] form (posture) add their weights to the diagonal
   // instead of going through the dense product.
-  void hessian(CArr sw_, double lambda2, Arr H_, Arr g_) {
+  void hessian(CArr sw_, double lambda2, Arr H_, Arr g_) { hessian_core(sw_.data(), lambda2, H_.data(), g_.data()); }
+
+  void hessian_core(const double *swp, double lambda2, double *Hp, double *gp) {
     int nv = model->nv;
-    const double *swp = sw_.data();
     MapRM J(J_all.p, m_tasks, nv);
-    MapRM H(H_.data(), nv, nv);
-    MapV g(g_.data(), nv);
+    MapRM H(Hp, nv, nv);
+    MapV g(gp, nv);
     dense_rows.clear();
     std::vector<char> ident(m_tasks, 0);
     for (auto &t : tasks)
@@ -1232,6 +1248,96 @@ struct Tick {
     std::copy(ub.p, ub.p + nv, ub_.data());
   }
 
+
+  // ------------------------------------------------------------ the fused velocity-level tick
+  // Augmentation's QP (H, g, rows or the slack QP) into the strategy's buffers, DAQP on it with
+  // the solver's hot start, then v clipped to the box and q+ = q (+) v dt, in one call
+  // (control/compiled.py CompiledTick.solve_velocity: the Python level takes over on any tick
+  // this does not finish cleanly).
+  struct QPBufs {
+    Buf H, g, C, l, u, lb, ub, x, lam, slot, sidx_owner, sw;
+    const int64_t *sidx = nullptr;
+    int64_t *slotp = nullptr;
+    int ns = 0, n = 0;
+    bool soft = false, warm = true;
+    double primal_tol = 1e-9, dual_tol = 1e-12, eps_prox = 0.0;
+    int iter_limit = 1000;
+    Eigen::MatrixXd Hv_rm;
+    Eigen::VectorXd gv;
+  } qp;
+  Eigen::VectorXd qn;
+  void set_qp(Arr H_, Arr g_, Arr C_, Arr l_, Arr u_, Arr lb_, Arr ub_, Arr x_, Arr lam_, bool soft,
+              IArr slot_buf, IArr soft_idx, CArr soft_w, bool warm, double primal_tol,
+              double dual_tol, int iter_limit, double eps_prox) {
+    qp.H = Buf(H_);
+    qp.g = Buf(g_);
+    qp.C = Buf(C_);
+    qp.l = Buf(l_);
+    qp.u = Buf(u_);
+    qp.lb = Buf(lb_);
+    qp.ub = Buf(ub_);
+    qp.x = Buf(x_);
+    qp.lam = Buf(lam_);
+    qp.n = int(g_.size());
+    qp.soft = soft;
+    qp.slot.owner = nb::find(slot_buf);
+    qp.slotp = slot_buf.data();
+    qp.sidx_owner.owner = nb::find(soft_idx);
+    qp.sidx = soft_idx.data();
+    qp.ns = int(soft_idx.size());
+    qp.sw.owner = nb::find(soft_w);
+    qp.sw.p = const_cast<double *>(soft_w.data());
+    qp.warm = warm;
+    qp.primal_tol = primal_tol;
+    qp.dual_tol = dual_tol;
+    qp.iter_limit = iter_limit;
+    qp.eps_prox = eps_prox;
+  }
+  // Returns (k slots or -k to grow, flag, iterations, ok, largest slack, solve seconds,
+  // assembly seconds); on ok, x (the QP's variable) is clipped and q_out holds q+.
+  nb::tuple fused(CArr sw_, double lambda2, int n_last, double dt, Arr q_out) {
+    auto t0 = std::chrono::steady_clock::now();
+    int nv = model->nv;
+    int nin = n_rows;
+    int k = 0;
+    if (qp.soft) {
+      qp.Hv_rm.resize(nv, nv);
+      qp.gv.resize(nv);
+      hessian_core(sw_.data(), lambda2, qp.Hv_rm.data(), qp.gv.data());  // symmetric: any order
+      k = slack_core(qp.Hv_rm.data(), qp.gv.data(), C.p, l.p, u.p, lb.p, ub.p, nv, nin, qp.sidx,
+                     qp.ns, qp.sw.p, qp.H.p, qp.g.p, qp.C.p, qp.l.p, qp.u.p, qp.lb.p, qp.ub.p, qp.n,
+                     qp.slotp, n_last);
+      if (k < 0) return nb::make_tuple(k, 0, 0, false, 0.0, 0.0, 0.0);
+    } else {
+      hessian_core(sw_.data(), lambda2, qp.H.p, qp.g.p);
+      if (nin) {
+        std::copy(C.p, C.p + size_t(nin) * nv, qp.C.p);
+        std::copy(l.p, l.p + nin, qp.l.p);
+        std::copy(u.p, u.p + nin, qp.u.p);
+      }
+      std::copy(lb.p, lb.p + nv, qp.lb.p);
+      std::copy(ub.p, ub.p + nv, qp.ub.p);
+    }
+    auto t1 = std::chrono::steady_clock::now();
+    DaqpOut o = daqp_core(qp.H.p, qp.g.p, qp.C.p, qp.l.p, qp.u.p, qp.lb.p, qp.ub.p, qp.n, nin,
+                          qp.x.p, qp.lam.p, qp.warm, qp.primal_tol, qp.dual_tol, qp.iter_limit,
+                          qp.eps_prox, false);
+    auto t2 = std::chrono::steady_clock::now();
+    double smax = 0.0;
+    if (o.ok) {
+      double *x = qp.x.p;
+      for (int i = 0; i < nv; ++i) x[i] = std::min(std::max(x[i], lb.p[i]), ub.p[i]);
+      for (int j = 0; j < k; ++j) smax = std::max(smax, x[nv + j]);
+      qn.resize(nv);
+      for (int i = 0; i < nv; ++i) qn[i] = x[i] * dt;
+      Eigen::Map<Eigen::VectorXd> qo(q_out.data(), model->nq);
+      pinocchio::integrate(*model, q, qn, qo);
+    }
+    double solve_s = std::chrono::duration<double>(t2 - t1).count();
+    double asm_s = std::chrono::duration<double>(t1 - t0).count();
+    return nb::make_tuple(k, o.flag, o.iters, o.ok, smax, solve_s, asm_s);
+  }
+
   size_t n_tasks() const { return tasks.size(); }
 };
 
@@ -1266,6 +1372,8 @@ NB_MODULE(_kernel, m) {
       .def("damper_last_time", &Tick::damper_last_time)
       .def("build", &Tick::build)
       .def("hessian", &Tick::hessian)
+      .def("set_qp", &Tick::set_qp)
+      .def("fused", &Tick::fused)
       .def("copy_constraints", &Tick::copy_constraints)
       .def_prop_ro("n_tasks", &Tick::n_tasks);
 }
