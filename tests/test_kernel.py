@@ -325,3 +325,21 @@ def test_shipped_configs_compiled_equal_python(repo_dir: Path, config: str) -> N
         assert a.status == b.status
         err = max(err, float(np.abs(a.q - b.q).max()))
     assert err <= 1e-9, f"{config}: compiled vs Python {err:.2e} rad"
+
+
+@needs_kernel
+@pytest.mark.parametrize("variant", ["A", "B"])
+def test_fused_tick_equals_the_unfused_compiled_tick(shared_dir: Path, variant: str) -> None:
+    """The fused call (QP, DAQP, clip, integrate in one) gives the unfused compiled run to the
+    bit: the same QP, the same DAQP inputs and hot start, pinocchio's integrate."""
+    cfg, targets, q0, q_nom = _workload(shared_dir, variant)
+    runs = []
+    for fused in (True, False):
+        ctrl = Controller(cfg)
+        if not fused:
+            ctrl.strategy.fused_error = "turned off by the test"
+        ctrl.reset(q0)
+        ctrl.task("posture").set_target(q_nom)
+        runs.append(np.array([ctrl.step(targets(k)).q for k in range(200)]))
+        assert ctrl.strategy.fused_error == ("" if fused else "turned off by the test")
+    assert np.array_equal(runs[0], runs[1])
