@@ -72,6 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         ax.set_yticks(list(y), labels, fontsize=7)
         ax.invert_yaxis()
         ax.set_xscale("log")
+        ax.set_xlim(left=20)
         ax.set_xlabel("µs per tick (median bar, p95 mark; log scale)")
         ax.set_title(f"workload {v}")
         ax.grid(axis="x", alpha=0.3)
