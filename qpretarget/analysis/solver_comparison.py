@@ -567,6 +567,7 @@ def _run_one(
     cfg = dict(config)
     cfg["solver"] = _solver_spec(name, config)
     controller = Controller(cfg, base_dir=base_dir)
+    controller.strategy.use_fused = False  # every QP through QPSolver.solve, recorded below
     solvers = controller.strategy.solvers()
     records: list[tuple[float, int, bool]] = []  # per QP solve: violation, iterations, success
     for s in solvers:

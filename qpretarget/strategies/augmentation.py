@@ -163,7 +163,7 @@ class Augmentation(Strategy):
         A kernel error turns the fused call off for good (:attr:`fused_error` says why); the
         tick and the next ones are solved by :meth:`solve`.
         """
-        if self.fused_error:
+        if self.fused_error or not self.use_fused:
             return None
         try:
             return self._solve_fused(tp)

@@ -134,6 +134,10 @@ class Strategy(abc.ABC):
     def solve(self, tp: TickProblem) -> StrategyResult:
         """Solve this tick."""
 
+    #: Let :meth:`solve_fused` run when it can (``False``: every QP goes through the strategy's
+    #: ``QPSolver.solve``, e.g. to record each one, as ``compare-solvers`` does).
+    use_fused: bool = True
+
     def solve_fused(self, tp: TickProblem) -> tuple[StrategyResult, np.ndarray] | None:
         """Solve the tick and integrate it in one compiled call (``tp.compiled`` set).
 

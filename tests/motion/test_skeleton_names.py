@@ -72,6 +72,9 @@ def test_skeleton_is_recognised_and_retargeted(tmp_path, names, expected, contro
     # hand bone: the hand key-point is extended past the wrist by half the forearm, where CMU's
     # hand joint sits (collinear, ratio 0.5 to 3e-7 m on this clip). The targets are built from
     # the robot's stance foot (Poubel eq. 1), so that 3e-7 m reaches the other targets through
-    # the closed loop (measured 5e-8 m); 1e-6 m still fails any other mapping of a joint.
+    # the closed loop (5e-8 m measured before the run started in the person's first stance).
+    # That start settles until the base and soles are still (a speed threshold): the 3e-7 m
+    # changes where it stops, and the targets then differ by up to 4e-4 m (measured). 2e-3 m
+    # still fails any other mapping of a joint (the next joint is 5 cm or more away).
     for task in ("left_elbow", "right_elbow", "left_hand", "right_hand"):
-        np.testing.assert_allclose(run.targets[task], cmu_run.targets[task], atol=1e-6)
+        np.testing.assert_allclose(run.targets[task], cmu_run.targets[task], atol=2e-3)
