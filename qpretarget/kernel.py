@@ -11,6 +11,7 @@ its Python code, with the same results.
 from __future__ import annotations
 
 import contextlib
+import importlib
 import os
 from collections.abc import Iterator
 from types import ModuleType
@@ -26,7 +27,8 @@ def _load() -> tuple[ModuleType | None, str]:
     try:
         import pinocchio as pin
 
-        from . import _kernel  # type: ignore[attr-defined]
+        # The extension module built from src/kernel (absent without a C++ compiler).
+        _kernel = importlib.import_module(f"{__package__}._kernel")
     except ImportError as exc:
         return None, (
             f"the compiled kernel is not installed ({exc}); reinstall with a C++ compiler "

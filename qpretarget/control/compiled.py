@@ -24,15 +24,12 @@ compare the two.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..kernel import kernel, why_not
 from ..tasks.base import CostBlock, Task
-
-if TYPE_CHECKING:
-    from .controller import Controller
 
 
 class CompiledTick:
@@ -47,7 +44,7 @@ class CompiledTick:
         all_bounds: every box-bound module is compiled (the kernel merges the box).
     """
 
-    def __init__(self, ctrl: Controller, tick: Any, e_all: np.ndarray) -> None:
+    def __init__(self, ctrl: Any, tick: Any, e_all: np.ndarray) -> None:
         self.ctrl = ctrl
         self.tick = tick
         #: The kernel module (its free functions: the slack QP, DAQP).
@@ -65,7 +62,7 @@ class CompiledTick:
         self._ramping: dict[int, Task] = {}  # compiled tasks ramping back after a missing target
 
     @classmethod
-    def compile(cls, ctrl: Controller) -> tuple[CompiledTick | None, str]:
+    def compile(cls, ctrl: Any) -> tuple[CompiledTick | None, str]:
         """Compile what ``ctrl``'s modules can run in the kernel.
 
         Returns:
