@@ -798,10 +798,145 @@ struct DaqpOut {
   bool ok = false;
 };
 
+
+// The previous tick's active set, checked for optimality before DAQP runs (fused tick only).
+// With W the constraints active at the last solution (each on the side of its multiplier's sign,
+// equalities always), the equality-constrained QP  min 1/2 x'Hx + g'x  s.t. the W constraints
+// held as equalities  is solved by its KKT system (variables fixed at their active bounds, the
+// rest through a Cholesky factor of H's free block and the Schur complement of the active rows).
+// If every multiplier has the sign of its side and no other constraint is violated (DAQP's
+// tolerances), that point satisfies the KKT conditions of the whole QP: it is the unique optimum
+// (H positive definite), the one DAQP would return to round-off, found without its setup and
+// iterations. Otherwise (a change of active set, a singular system) DAQP solves the tick.
+struct KKTWork {
+  std::vector<int> freev, fixedv, rowsA;
+  std::vector<char> isfixed;
+  Eigen::MatrixXd HFF, AF, Y, S;
+  Eigen::VectorXd h, bA, z, mu, xF, x, grad;
+};
+
+static bool kkt_shortcut(const double *Hp, const double *gp, const double *Cp, const double *lp,
+                         const double *up, const double *lbp, const double *ubp, int n, int nin,
+                         double *xo, double *lamio, double primal_tol, double dual_tol) {
+  static KKTWork k;
+  Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> H(Hp, n, n);
+  Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> C(Cp, nin, n);
+  Eigen::Map<const Eigen::VectorXd> g(gp, n);
+  bool any = false;
+  for (int i = 0; i < n + nin && !any; ++i) any = lamio[i] != 0.0;
+  if (!any) return false;
+  k.freev.clear();
+  k.fixedv.clear();
+  k.rowsA.clear();
+  k.isfixed.assign(n, 0);
+  k.x.setZero(n);
+  for (int i = 0; i < n; ++i) {
+    bool eq = lbp[i] == ubp[i];
+    if (eq || lamio[i] != 0.0) {
+      double b = eq ? lbp[i] : (lamio[i] > 0.0 ? ubp[i] : lbp[i]);
+      if (!std::isfinite(b)) return false;
+      k.isfixed[i] = 1;
+      k.fixedv.push_back(i);
+      k.x[i] = b;
+    } else {
+      k.freev.push_back(i);
+    }
+  }
+  for (int r = 0; r < nin; ++r) {
+    bool eq = std::isfinite(lp[r]) && lp[r] == up[r];
+    if (eq || lamio[n + r] != 0.0) k.rowsA.push_back(r);
+  }
+  int nF = int(k.freev.size()), mA = int(k.rowsA.size());
+  if (mA > nF || nF == 0) return false;
+  k.HFF.resize(nF, nF);
+  k.h.resize(nF);
+  for (int a = 0; a < nF; ++a) {
+    int ia = k.freev[a];
+    double hv = g[ia];
+    for (int j : k.fixedv) hv += H(ia, j) * k.x[j];
+    k.h[a] = hv;
+    for (int b = 0; b < nF; ++b) k.HFF(a, b) = H(ia, k.freev[b]);
+  }
+  Eigen::LLT<Eigen::MatrixXd> llt(k.HFF);
+  if (llt.info() != Eigen::Success) return false;
+  k.AF.resize(nF, mA);  // A_F' (free columns of the active rows, transposed)
+  k.bA.resize(mA);
+  for (int c = 0; c < mA; ++c) {
+    int r = k.rowsA[c];
+    double b = (std::isfinite(lp[r]) && lp[r] == up[r]) ? up[r] : (lamio[n + r] > 0.0 ? up[r] : lp[r]);
+    if (!std::isfinite(b)) return false;
+    for (int j : k.fixedv) b -= C(r, j) * k.x[j];
+    k.bA[c] = b;
+    for (int a = 0; a < nF; ++a) k.AF(a, c) = C(r, k.freev[a]);
+  }
+  const auto L = llt.matrixL();
+  k.z = L.solve(k.h);
+  k.mu.resize(mA);
+  if (mA > 0) {
+    k.Y = L.solve(k.AF);
+    k.S.noalias() = k.Y.transpose() * k.Y;
+    Eigen::LLT<Eigen::MatrixXd> sl(k.S);
+    if (sl.info() != Eigen::Success) return false;
+    double dmin = k.S.diagonal().minCoeff(), dmax = k.S.diagonal().maxCoeff();
+    Eigen::VectorXd ld = sl.matrixLLT().diagonal();
+    if (!(dmin > 0) || ld.minCoeff() * ld.minCoeff() < 1e-12 * dmax) return false;  // near-singular
+    k.mu = -sl.solve(k.bA + k.Y.transpose() * k.z);
+    k.xF = -(L.transpose().solve(k.z + k.Y * k.mu));
+  } else {
+    k.xF = -(L.transpose().solve(k.z));
+  }
+  for (int a = 0; a < nF; ++a) k.x[k.freev[a]] = k.xF[a];
+  if (!k.x.allFinite() || !k.mu.allFinite()) return false;
+  // dual feasibility of the active rows (equalities: any sign)
+  for (int c = 0; c < mA; ++c) {
+    int r = k.rowsA[c];
+    if (std::isfinite(lp[r]) && lp[r] == up[r]) continue;
+    if (lamio[n + r] > 0.0 ? k.mu[c] < -dual_tol : k.mu[c] > dual_tol) return false;
+  }
+  // bound multipliers nu_B = -((Hx + g)_B + (A' mu)_B) and their signs
+  k.grad.noalias() = H * k.x;
+  k.grad += g;
+  std::vector<double> nu(k.fixedv.size());
+  for (size_t t = 0; t < k.fixedv.size(); ++t) {
+    int j = k.fixedv[t];
+    double v = k.grad[j];
+    for (int c = 0; c < mA; ++c) v += C(k.rowsA[c], j) * k.mu[c];
+    nu[t] = -v;
+    if (lbp[j] == ubp[j]) continue;
+    if (lamio[j] > 0.0 ? nu[t] < -dual_tol : nu[t] > dual_tol) return false;
+  }
+  // primal feasibility of everything else
+  for (int i = 0; i < n; ++i) {
+    if (k.isfixed[i]) continue;
+    if (k.x[i] < lbp[i] - primal_tol || k.x[i] > ubp[i] + primal_tol) return false;
+  }
+  std::vector<char> act(nin, 0);
+  for (int r : k.rowsA) act[r] = 1;
+  for (int r = 0; r < nin; ++r) {
+    if (act[r] || (!std::isfinite(lp[r]) && !std::isfinite(up[r]))) continue;
+    double cx = C.row(r).dot(k.x);
+    if (cx < lp[r] - primal_tol || cx > up[r] + primal_tol) return false;
+  }
+  // the optimum: x and the multipliers in DAQP's layout (bounds, then rows; sign = side)
+  std::copy(k.x.data(), k.x.data() + n, xo);
+  std::fill(lamio, lamio + n + nin, 0.0);
+  for (size_t t = 0; t < k.fixedv.size(); ++t) lamio[k.fixedv[t]] = nu[t];
+  for (int c = 0; c < mA; ++c) lamio[n + k.rowsA[c]] = k.mu[c];
+  return true;
+}
+
 static DaqpOut daqp_core(const double *H, const double *g, const double *Cp, const double *lp,
                          const double *up, const double *lbp, const double *ubp, int n, int nin,
                          double *xo, double *lamio, bool warm, double primal_tol, double dual_tol,
-                         int iter_limit, double eps_prox, bool release_gil) {
+                         int iter_limit, double eps_prox, bool release_gil, bool shortcut = false) {
+  if (shortcut && warm &&
+      kkt_shortcut(H, g, Cp, lp, up, lbp, ubp, n, nin, xo, lamio, primal_tol, dual_tol)) {
+    DaqpOut out;
+    out.flag = 1;
+    out.iters = 0;
+    out.ok = true;
+    return out;
+  }
   static DaqpWork w;
   const double BIG = 1e30;
   w.rows.clear();
@@ -1259,13 +1394,14 @@ struct Tick {
     const int64_t *sidx = nullptr;
     int64_t *slotp = nullptr;
     int ns = 0, n = 0;
-    bool soft = false, warm = true;
+    bool soft = false, warm = true, shortcut = true;
     double primal_tol = 1e-9, dual_tol = 1e-12, eps_prox = 0.0;
     int iter_limit = 1000;
     Eigen::MatrixXd Hv_rm;
     Eigen::VectorXd gv;
   } qp;
   Eigen::VectorXd qn;
+  void set_shortcut(bool on) { qp.shortcut = on; }
   void set_qp(Arr H_, Arr g_, Arr C_, Arr l_, Arr u_, Arr lb_, Arr ub_, Arr x_, Arr lam_, bool soft,
               IArr slot_buf, IArr soft_idx, CArr soft_w, bool warm, double primal_tol,
               double dual_tol, int iter_limit, double eps_prox) {
@@ -1321,7 +1457,7 @@ struct Tick {
     auto t1 = std::chrono::steady_clock::now();
     DaqpOut o = daqp_core(qp.H.p, qp.g.p, qp.C.p, qp.l.p, qp.u.p, qp.lb.p, qp.ub.p, qp.n, nin,
                           qp.x.p, qp.lam.p, qp.warm, qp.primal_tol, qp.dual_tol, qp.iter_limit,
-                          qp.eps_prox, false);
+                          qp.eps_prox, false, qp.shortcut);
     auto t2 = std::chrono::steady_clock::now();
     double smax = 0.0;
     if (o.ok) {
@@ -1373,6 +1509,7 @@ NB_MODULE(_kernel, m) {
       .def("build", &Tick::build)
       .def("hessian", &Tick::hessian)
       .def("set_qp", &Tick::set_qp)
+      .def("set_shortcut", &Tick::set_shortcut)
       .def("fused", &Tick::fused)
       .def("copy_constraints", &Tick::copy_constraints)
       .def_prop_ro("n_tasks", &Tick::n_tasks);
