@@ -191,11 +191,11 @@ class Augmentation(Strategy):
         soft = bool(self._soft_idx.size)
         sv.prepare(p)
         buf = self._slot_buf if soft else self._no_slots
-        key = (p.H, sv.buffers(), buf)
+        x, lam = sv.buffers()
+        key = (p.H, x, lam, buf)  # registered again only when one of them is a new array
         if self._fused_key is None or any(
             a is not b for a, b in zip(key, self._fused_key, strict=True)
         ):
-            x, lam = sv.buffers()
             ct.tick.set_qp(
                 p.H, p.g, p.C, p.l, p.u, p.lb, p.ub, x, lam, soft, buf,
                 self._soft_idx64 if soft else self._no_slots, self._soft_w if soft else p.g[:0],

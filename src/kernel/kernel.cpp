@@ -1070,6 +1070,7 @@ struct Tick {
   Eigen::MatrixXd Hl;
   Eigen::VectorXd rw;
   std::vector<int> dense_rows;
+  size_t dense_tasks = size_t(-1);
 
   Tick(nb::handle py_model, nb::handle py_data)
       : model(extract_ref<Model>(py_model, "pinocchio.Model")),
@@ -1273,29 +1274,39 @@ struct Tick {
       double k = t->k(dt);
       for (int i = 0; i < t->dim; ++i) v_all.p[t->row + i] = e[i] * k;
     }
-    // box bounds, most important first; a less important one gives (Controller._merge_bounds)
     gave.assign(bounds.size(), std::numeric_limits<double>::quiet_NaN());
-    if (!merge || bounds.empty()) {  // the box is merged in Python (a module without a compiled part)
-      for (size_t b = 0; b < bounds.size(); ++b) {
-        auto &bk = bounds[b];
-        bk->lo_out.resize(m.nv);
-        bk->hi_out.resize(m.nv);
-        bk->has_out = bk->compute(q, dt, bk->lo_out, bk->hi_out);
-        if (bk->has_out) gave[b] = 1.0;
-      }
-      MapRM Cm(C.p, n_rows, m.nv);
-      bool vd_ready = false;
-      for (auto &c : contacts) c.compute(m, d, vdata, vd_ready, q, v, dt, Cm, l.p, u.p);
-      for (auto &pk : polygons) pk.compute(m, d, vdata, vd_ready, q, v, dt, Cm, u.p);
-      for (auto &dk : damper_rows_) dk->rows(dt, Cm, u.p);
-      return gave;
+    if (merge && !bounds.empty())
+      merge_boxes(dt);
+    else
+      own_boxes(dt);
+    MapRM Cm(C.p, n_rows, m.nv);
+    bool vd_ready = false;
+    for (auto &c : contacts) c.compute(m, d, vdata, vd_ready, q, v, dt, Cm, l.p, u.p);
+    for (auto &pk : polygons) pk.compute(m, d, vdata, vd_ready, q, v, dt, Cm, u.p);
+    for (auto &dk : damper_rows_) dk->rows(dt, Cm, u.p);
+    return gave;
+  }
+
+  // Each compiled box module's own box, merged in Python with the others (gave: 1 = a box).
+  void own_boxes(double dt) {
+    int nv = model->nv;
+    for (size_t b = 0; b < bounds.size(); ++b) {
+      auto &bk = bounds[b];
+      bk->lo_out.resize(nv);
+      bk->hi_out.resize(nv);
+      bk->has_out = bk->compute(q, dt, bk->lo_out, bk->hi_out);
+      if (bk->has_out) gave[b] = 1.0;
     }
-    MapV LB(lb.p, m.nv), UB(ub.p, m.nv);
+  }
+
+  // The box, most important first; a less important one gives (Controller._merge_bounds).
+  void merge_boxes(double dt) {
+    int nv = model->nv;
+    MapV LB(lb.p, nv), UB(ub.p, nv);
     LB.setConstant(-INF);
     UB.setConstant(INF);
-    gave.assign(bounds.size(), std::numeric_limits<double>::quiet_NaN());
-    blo.resize(m.nv);
-    bhi.resize(m.nv);
+    blo.resize(nv);
+    bhi.resize(nv);
     bool first = true;
     for (size_t b = 0; b < bounds.size(); ++b) {
       if (!bounds[b]->compute(q, dt, blo, bhi)) continue;
@@ -1307,7 +1318,7 @@ struct Tick {
       }
       double amount = -INF;
       bool any = false;
-      for (int i = 0; i < m.nv; ++i) {
+      for (int i = 0; i < nv; ++i) {
         double nl = std::max(LB[i], blo[i]), nu = std::min(UB[i], bhi[i]);
         if (nl > nu) {
           any = true;
@@ -1321,12 +1332,6 @@ struct Tick {
       }
       if (any) gave[b] = amount;
     }
-    MapRM Cm(C.p, n_rows, m.nv);
-    bool vd_ready = false;
-    for (auto &c : contacts) c.compute(m, d, vdata, vd_ready, q, v, dt, Cm, l.p, u.p);
-    for (auto &pk : polygons) pk.compute(m, d, vdata, vd_ready, q, v, dt, Cm, u.p);
-    for (auto &dk : damper_rows_) dk->rows(dt, Cm, u.p);
-    return gave;
   }
 
   // Augmentation's cost (strategies/augmentation.py, Dariush 2009 4.3.1, CRAC eq. 10):
@@ -1340,13 +1345,16 @@ struct Tick {
     MapRM J(J_all.p, m_tasks, nv);
     MapRM H(Hp, nv, nv);
     MapV g(gp, nv);
-    dense_rows.clear();
-    std::vector<char> ident(m_tasks, 0);
-    for (auto &t : tasks)
-      if (t->identity_col >= 0)
-        for (int i = 0; i < t->dim; ++i) ident[t->row + i] = 1;
-    for (int r = 0; r < m_tasks; ++r)
-      if (!ident[r]) dense_rows.push_back(r);
+    if (dense_tasks != tasks.size()) {  // rows outside the [0 I] tasks, once per task set
+      dense_rows.clear();
+      std::vector<char> ident(m_tasks, 0);
+      for (auto &t : tasks)
+        if (t->identity_col >= 0)
+          for (int i = 0; i < t->dim; ++i) ident[t->row + i] = 1;
+      for (int r = 0; r < m_tasks; ++r)
+        if (!ident[r]) dense_rows.push_back(r);
+      dense_tasks = tasks.size();
+    }
     int md = int(dense_rows.size());
     Jw.resize(md, nv);
     rw.resize(md);
@@ -1373,14 +1381,17 @@ struct Tick {
 
   // Copies of this tick's rows and box into a QP's buffers.
   void copy_constraints(Arr C_, Arr l_, Arr u_, Arr lb_, Arr ub_) {
+    copy_core(C_.data(), l_.data(), u_.data(), lb_.data(), ub_.data());
+  }
+  void copy_core(double *C_, double *l_, double *u_, double *lb_, double *ub_) const {
     int nv = model->nv;
     if (n_rows) {
-      std::copy(C.p, C.p + size_t(n_rows) * nv, C_.data());
-      std::copy(l.p, l.p + n_rows, l_.data());
-      std::copy(u.p, u.p + n_rows, u_.data());
+      std::copy(C.p, C.p + size_t(n_rows) * nv, C_);
+      std::copy(l.p, l.p + n_rows, l_);
+      std::copy(u.p, u.p + n_rows, u_);
     }
-    std::copy(lb.p, lb.p + nv, lb_.data());
-    std::copy(ub.p, ub.p + nv, ub_.data());
+    std::copy(lb.p, lb.p + nv, lb_);
+    std::copy(ub.p, ub.p + nv, ub_);
   }
 
 
@@ -1446,13 +1457,7 @@ struct Tick {
       if (k < 0) return nb::make_tuple(k, 0, 0, false, 0.0, 0.0, 0.0);
     } else {
       hessian_core(sw_.data(), lambda2, qp.H.p, qp.g.p);
-      if (nin) {
-        std::copy(C.p, C.p + size_t(nin) * nv, qp.C.p);
-        std::copy(l.p, l.p + nin, qp.l.p);
-        std::copy(u.p, u.p + nin, qp.u.p);
-      }
-      std::copy(lb.p, lb.p + nv, qp.lb.p);
-      std::copy(ub.p, ub.p + nv, qp.ub.p);
+      copy_core(qp.C.p, qp.l.p, qp.u.p, qp.lb.p, qp.ub.p);
     }
     auto t1 = std::chrono::steady_clock::now();
     DaqpOut o = daqp_core(qp.H.p, qp.g.p, qp.C.p, qp.l.p, qp.u.p, qp.lb.p, qp.ub.p, qp.n, nin,
