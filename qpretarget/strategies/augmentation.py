@@ -73,6 +73,7 @@ class Augmentation(Strategy):
         self._W_is_eye = False
         self._sw_all = np.zeros(m)
         self._fused_key: tuple[Any, ...] | None = None  # the buffers the kernel's fused call holds
+        self._fused_settings: tuple[Any, ...] = ()  # and the solver settings it was given
         #: Why the fused kernel call was turned off ('' while it is used when possible).
         self.fused_error = ""
         self._no_slots = np.zeros(1, dtype=np.int64)
@@ -192,9 +193,13 @@ class Augmentation(Strategy):
         sv.prepare(p)
         buf = self._slot_buf if soft else self._no_slots
         x, lam = sv.buffers()
-        key = (p.H, x, lam, buf)  # registered again only when one of them is a new array
-        if self._fused_key is None or any(
-            a is not b for a, b in zip(key, self._fused_key, strict=True)
+        # Registered again when one of the arrays is a new one or a solver setting changed.
+        key = (p.H, x, lam, buf)
+        skey = tuple(settings.values())
+        if (
+            self._fused_key is None
+            or any(a is not b for a, b in zip(key, self._fused_key, strict=True))
+            or skey != self._fused_settings
         ):
             ct.tick.set_qp(
                 p.H, p.g, p.C, p.l, p.u, p.lb, p.ub, x, lam, soft, buf,
@@ -202,7 +207,7 @@ class Augmentation(Strategy):
                 settings["warm"], settings["primal_tol"], settings["dual_tol"],
                 settings["iter_limit"], settings["eps_prox"],
             )  # fmt: skip
-            self._fused_key = key
+            self._fused_key, self._fused_settings = key, skey
         n_last = self._slot_rows.size if soft else 0
         if n_last and self._slot_rows.base is not buf:  # last tick's rows from the Python path
             buf[:n_last] = self._slot_rows

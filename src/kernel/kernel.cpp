@@ -772,7 +772,6 @@ struct Daqp {
 static Daqp g_daqp;
 
 static bool daqp_load(const std::string &path) { return g_daqp.quadprog != nullptr || g_daqp.load(path); }
-static std::string daqp_error() { return g_daqp.error; }
 
 // Defaults as DAQP sets them (for the layout check in Python: these must be DAQP's documented
 // defaults, else the struct layout differs and the compiled solve is not used).
@@ -1225,7 +1224,6 @@ struct Tick {
     dampers.at(id)->row = row;
     damper_rows_.push_back(dampers.at(id));
   }
-  void clear_bounds() { bounds.clear(); }
   void damper_reset(int id, nb::handle gdata) {
     auto &dk = dampers.at(id);
     dk->set_geometry(dk->keep_gm, gdata);
@@ -1479,14 +1477,12 @@ struct Tick {
     return nb::make_tuple(k, o.flag, o.iters, o.ok, smax, solve_s, asm_s);
   }
 
-  size_t n_tasks() const { return tasks.size(); }
 };
 
 NB_MODULE(_kernel, m) {
   m.doc() = "qpretarget's compiled per-tick kernel (tasks, bounds, contact rows, augmentation, DAQP)";
   m.attr("PINOCCHIO_VERSION") = PINOCCHIO_VERSION;
   m.def("daqp_load", &daqp_load, "Load DAQP's C entry points from its installed extension module.");
-  m.def("daqp_error", &daqp_error);
   m.def("daqp_defaults", &daqp_defaults);
   m.def("daqp_solve", &daqp_solve);
   m.def("slack_qp", &slack_qp);
@@ -1504,7 +1500,6 @@ NB_MODULE(_kernel, m) {
       .def("add_damper", &Tick::add_damper)
       .def("add_damper_bounds", &Tick::add_damper_bounds)
       .def("add_damper_rows", &Tick::add_damper_rows)
-      .def("clear_bounds", &Tick::clear_bounds)
       .def("set_merge", &Tick::set_merge)
       .def("box", &Tick::box)
       .def("damper_reset", &Tick::damper_reset)
@@ -1516,6 +1511,5 @@ NB_MODULE(_kernel, m) {
       .def("set_qp", &Tick::set_qp)
       .def("set_shortcut", &Tick::set_shortcut)
       .def("fused", &Tick::fused)
-      .def("copy_constraints", &Tick::copy_constraints)
-      .def_prop_ro("n_tasks", &Tick::n_tasks);
+      .def("copy_constraints", &Tick::copy_constraints);
 }
