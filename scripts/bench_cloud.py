@@ -53,6 +53,7 @@ def main() -> None:
     import qpretarget as qp
     from qpretarget.cloud.em import CloudRetargeter
     from qpretarget.cloud.meshes import load_link_meshes
+    from qpretarget.cloud.neighbours import BACKEND as knn_backend
     from qpretarget.cloud.render import kinect_camera, render_sequence
     from qpretarget.cloud.template import Template
 
@@ -150,6 +151,7 @@ def main() -> None:
             "numpy": np.__version__,
             "scipy": scipy.__version__,
             "proxsuite": proxsuite.__version__,
+            "knn": knn_backend,
         },
         "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
     }
@@ -173,8 +175,6 @@ def _time_stages(rt: Any, acc: dict[str, float]) -> None:
 
     Nested: a stage's time includes the searches and E-steps inside it.
     """
-    import scipy.spatial
-
     import qpretarget.cloud.em as em_module
     import qpretarget.cloud.io as io_module
 
@@ -207,16 +207,20 @@ def _time_stages(rt: Any, acc: dict[str, float]) -> None:
     io_module.estimate_normals = timed(io_module.estimate_normals, "cloud normals")
     em_module.estimate_normals = io_module.estimate_normals
 
-    class TimedTree(scipy.spatial.cKDTree):
-        def query(self, *a: Any, **k: Any) -> Any:
-            t0 = time.thread_time()
-            try:
-                return super().query(*a, **k)
-            finally:
-                label = f"kd-tree searches {self.m}-D"
-                acc[label] = acc.get(label, 0.0) + time.thread_time() - t0
+    import qpretarget.cloud.neighbours as nn_module
 
-    scipy.spatial.cKDTree = TimedTree
+    knn = nn_module.knn
+
+    def timed_knn(data: Any, query: Any, k: int) -> Any:
+        t0 = time.thread_time()
+        try:
+            return knn(data, query, k)
+        finally:
+            label = f"kd-tree searches {np.shape(data)[1]}-D"
+            acc[label] = acc.get(label, 0.0) + time.thread_time() - t0
+
+    nn_module.knn = timed_knn
+    em_module.knn = timed_knn
 
 
 if __name__ == "__main__":

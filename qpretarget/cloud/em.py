@@ -15,9 +15,9 @@ negative log-likelihood (eq. 3) is
 with :math:`c = (2\pi\sigma^2)^{3/2} \frac{\mu}{1-\mu} \frac{M}{N}`. (Eq. 4 as printed has
 :math:`(1-\mu)/\mu`; the value consistent with eq. 1 and 3, and with Myronenko and Song's CPD that
 the paper follows, is :math:`\mu/(1-\mu)`, used here.) ``estep: kdtree`` keeps, for each cloud
-point, its ``neighbors`` nearest template points (scipy ``cKDTree``) and drops the other terms of
-the sum, which are below :math:`e^{-d^2/2\sigma^2}` for a distance d beyond the k-th neighbour;
-the truncated likelihood is the one reported and made monotone (see below).
+point, its ``neighbors`` nearest template points (:func:`.neighbours.knn`) and drops the other
+terms of the sum, which are below :math:`e^{-d^2/2\sigma^2}` for a distance d beyond the k-th
+neighbour; the truncated likelihood is the one reported and made monotone (see below).
 
 **M-step** (eq. 5, 13-14 linearized, 16-17): with :math:`P_m = \sum_n p_{mn}`, the template's
 linearization :math:`v_m + J_m \Delta` and the temporal term
@@ -89,6 +89,7 @@ from ..solvers import make_solver
 from ..trajectory import RobotTrajectory
 from .config import CloudConfig
 from .io import CloudFrame, CloudSequence, estimate_normals, prepare_cloud
+from .neighbours import knn
 from .stability import (
     HipRuleState,
     StabilityRows,
@@ -336,21 +337,12 @@ def _kdtree_sums(
     pairs: np.ndarray | None,
 ) -> tuple[_Sums, np.ndarray]:
     """E-step over each cloud point's ``neighbors`` nearest active template points or ``pairs``."""
-    from scipy.spatial import cKDTree
-
     # (k, N) layout below: the reductions over each point's k pairs run along rows.
     d2: np.ndarray | None = None
     if pairs is None:
-        k = int(min(neighbors, len(A)))
-        # Sliding-midpoint splits (balanced_tree=False): built and queried 5-20 % faster
-        # here than median splits, same neighbours.
-        dist, nb = cKDTree(A, balanced_tree=False).query(B, k=k)
-        if k == 1:
-            dist, nb = dist[:, None], nb[:, None]
+        dist2, nb = knn(A, B, min(neighbors, len(A)))
         pairs = idx_act[nb]
-        d2 = np.ascontiguousarray(dist.T)
-        d2 *= d2
-    k = pairs.shape[1]
+        d2 = np.ascontiguousarray(dist2.T)
     if d2 is None:
         # Coordinate by coordinate on contiguous rows (a (N, k, 3) gather is slow).
         pairs_t = np.ascontiguousarray(pairs.T)
