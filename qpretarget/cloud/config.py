@@ -121,6 +121,11 @@ class CalibrationConfig:
             others track the pose alone; null: every frame). ``centre_information`` counts a
             frame's information as if frames came at 10 Hz; at 30 Hz consecutive frames show
             nearly the same bends, and running on each would count them three times.
+        centre_model: where the centres start (the prior mean of the estimate):
+            ``robot``: the robot's own centres (offsets 0); ``anthropometric``: a person's,
+            from segment-length fractions of the standing height (Winter's table,
+            :mod:`qpretarget.cloud.anthropometry`), placed along each limb of the calibrated
+            template from the fingertips (arms) or the floor (legs).
     """
 
     enabled: bool = True
@@ -141,6 +146,7 @@ class CalibrationConfig:
     centre_information: float = 0.1
     centre_axes: str = "limb"
     centre_rate: float | None = 10.0
+    centre_model: str = "robot"
 
 
 @dataclass
@@ -259,6 +265,7 @@ _CHOICES = {
     ("template", "skinning"): ("rigid", "lbs"),
     ("em", "estep"): ("kdtree", "dense"),
     ("calibration", "centre_axes"): ("limb", "free"),
+    ("calibration", "centre_model"): ("robot", "anthropometric"),
     ("em", "prediction"): ("ar3", "velocity", "constant"),
     ("em", "temporal_reference"): ("previous", "prediction"),
     ("stability", "mode"): ("qp", "hip_offset", "none"),

@@ -87,6 +87,7 @@ from ..problem import QPProblem
 from ..robot import RobotModel, load_robot
 from ..solvers import make_solver
 from ..trajectory import RobotTrajectory
+from .anthropometry import anthropometric_offsets
 from .config import CloudConfig
 from .io import CloudFrame, CloudSequence, estimate_normals, prepare_cloud
 from .neighbours import knn
@@ -599,6 +600,7 @@ class CloudRetargeter:
         self._centre_mean: np.ndarray = np.zeros(0)
         self._centre_info: np.ndarray = np.zeros((0, 0))
         self._centre_x: np.ndarray | None = None
+        self._centre_base: np.ndarray = np.zeros(0)  # fixed offsets (anthropometric model)
         make_solver(cfg.solver, path="solver")  # validate now
         self._solver = make_solver(cfg.solver, path="solver")
         self._solver_restore = make_solver(cfg.solver, path="solver")
@@ -1136,8 +1138,8 @@ class CloudRetargeter:
         return q, sigma2
 
     def _apply_centres(self, e: np.ndarray) -> None:
-        """Set the template's joint-centre offsets to ``U e``."""
-        self.template.set_centres((self._centre_basis @ e).reshape(-1, 3))
+        """Set the template's joint-centre offsets to ``e_0 + U e`` (``e_0``: the fixed ones)."""
+        self.template.set_centres((self._centre_base + self._centre_basis @ e).reshape(-1, 3))
 
     def _centre_prior(self, e: np.ndarray) -> float:
         r""":math:`\tfrac12 (e - \hat e)^\top \Lambda (e - \hat e)`."""
@@ -1331,6 +1333,22 @@ class CloudRetargeter:
         self._centre_x = None
         nc = U.shape[1]
         self._centre_mean = np.zeros(nc)
+        self._centre_base = np.zeros(3 * T.n_centres)
+        if cal.centre_model == "anthropometric":
+            # The person's centres from the standing height (a generic human model, as Wang
+            # 2017 IV.A takes them from one): the prior mean of the centres estimated while
+            # tracking, and fixed for the others the table places (wrists, hips, knees...).
+            # The height from the fitted (personalised) template, not the raw cloud, whose
+            # top percentiles hold outliers (1.94 m for a 1.76 m person at 5 % outliers).
+            points = T.pose(q, jacobians=False).points
+            height = float(points[:, 2].max())  # floor at z = 0
+            offsets = anthropometric_offsets(T, points, height, ax)
+            along = np.clip(np.einsum("ab,ab->a", offsets, ax), -cal.centre_bound, cal.centre_bound)
+            full = (along[:, None] * ax).reshape(-1)
+            if self._estimate_centres:
+                self._centre_mean = U.T @ full
+            self._centre_base = full - U @ self._centre_mean
+            self._apply_centres(self._centre_mean)
         self._centre_info = np.eye(nc) / max(cal.centre_prior, 1e-9) ** 2
         self.calibration_sigma2 = sigma2
         self.calibrated = True
