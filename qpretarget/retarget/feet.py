@@ -4,7 +4,11 @@ r"""Swing-sole targets of the kinematic balance mode, from the scaled person's f
 :class:`FootTargets` turns one sample of the person into the sole pose each robot foot should
 have if it swings (docs/retargeting.md, section 4b):
 
-* horizontally, beside a standing foot, the person's foot-to-foot vector since the standing
+* horizontally, near the floor, the scaled person's foot in the world (``absolute``,
+  :meth:`FootTargets.absolute_ankle`: each ankle's displacement since the first sample), kept
+  on its side of the standing foot; high up (a kick) or while the robot lags the person's turn
+  by more than 30 deg, blended towards the stride below (:meth:`FootTargets.place`);
+* the stride: beside a standing foot, the person's foot-to-foot vector since the standing
   foot touched down times the leg-length ratio :math:`s` (:meth:`FootTargets.stride`): the
   scaled person's stride, not the robot's leg proportions' (the person's ankle rolls forward
   over the toes during stance, a flat robot sole does not); laterally the robot's stance width
@@ -34,6 +38,13 @@ FOOT_YAW_RANGE = 0.8
 
 _OTHER = {"left": "right", "right": "left"}
 
+#: Absolute placement (``stepping.absolute``) is used in full while the robot's heading is
+#: within the first angle of the person's, and not at all beyond the second (linear blend with
+#: the stride placement in between) [rad]: a foot put at the person's spot behind a body that
+#: lags the person's turn twists the legs (the karate kata's 140 deg turns on one foot: stance
+#: slip 0.8 -> 5.4 mm without the gate).
+ABSOLUTE_HEADING = (math.radians(30.0), math.radians(60.0))
+
 #: The width of a step is measured across the feet's mean heading while their yaws differ by
 #: at most this [rad], else across the standing sole's.
 STRIDE_MEAN_YAW = 0.5
@@ -57,8 +68,15 @@ class FootTargets:
         leg_scale: float,
         leg_lengths: Mapping[str, float],
         leg_extension: float,
+        *,
+        absolute: bool = False,
     ) -> None:
         self.feet = feet
+        self.absolute = absolute
+        #: side -> (robot ankle, person's ankle) at the first sample (``absolute`` placement).
+        self.origin: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        #: (robot heading, person's waist turn) at the first sample [rad].
+        self.heading0: tuple[float, float] | None = None
         self.calibration = calibration
         self.leg_scale = leg_scale
         self.leg_lengths = dict(leg_lengths)
@@ -77,8 +95,18 @@ class FootTargets:
         #: side -> the person's foot pitch at the first sample (standing) [rad].
         self.pitch0: dict[str, float] = {}
 
-    def start(self, kp: Mapping[str, np.ndarray], soles: Mapping[str, pin.SE3]) -> None:
-        """Anchor the person's feet where they are and measure both stance widths."""
+    def start(
+        self,
+        kp: Mapping[str, np.ndarray],
+        soles: Mapping[str, pin.SE3],
+        heading: tuple[float, float] | None = None,
+    ) -> None:
+        """Anchor the person's feet where they are and measure both stance widths.
+
+        ``heading``: the robot's heading and the person's waist turn now [rad] (the reference
+        of :meth:`absolute_weight`).
+        """
+        self.heading0 = heading
         self.human_anchor = {
             side: np.array(kp[f"{side}_ankle"], float)
             for side in SIDES
@@ -99,6 +127,10 @@ class FootTargets:
             pitch = self.foot_pitch(side, kp)
             if pitch is not None:
                 self.pitch0[side] = pitch
+        self.origin = {
+            side: (self.feet.ankle_of(side, soles[side]), a.copy())
+            for side, a in self.human_anchor.items()
+        }
         psi = yaw_of(soles["left"].rotation[:, 0])
         lateral = np.array([-math.sin(psi), math.cos(psi), 0.0])
         self.width_r = float(lateral @ (soles["left"].translation - soles["right"].translation))
@@ -169,6 +201,60 @@ class FootTargets:
         sign = 1.0 if side == "left" else -1.0
         lat = sign * max(0.7 * self.width_r, self.width_r + sign * lat - self.width_h)
         return np.array([c * fwd - s_ * lat, s_ * fwd + c * lat, d[2]])
+
+    def absolute_weight(self, heading: tuple[float, float] | None) -> float:
+        r"""Share of the absolute placement in a swing target, from the heading error.
+
+        With :math:`e` the robot's turn since the first sample minus the person's waist turn
+        (``heading``: both now, [rad]), 1 for :math:`|e|` up to the first angle of
+        :data:`ABSOLUTE_HEADING`, 0 from the second, linear in between.
+        """
+        if not self.absolute:
+            return 0.0
+        if heading is None or self.heading0 is None:
+            return 1.0
+        e = (heading[0] - self.heading0[0]) - (heading[1] - self.heading0[1])
+        e = abs(math.atan2(math.sin(e), math.cos(e)))
+        lo, hi = ABSOLUTE_HEADING
+        return float(min(1.0, max(0.0, (hi - e) / (hi - lo))))
+
+    def absolute_ankle(self, side: str, ankle: np.ndarray) -> np.ndarray:
+        r"""The scaled person's ankle in the robot's world: :math:`a_r(0) + s R_a (a(t) - a(0))`.
+
+        :math:`a_r(0)` is the robot ankle and :math:`a(0)` the person's at the first sample,
+        :math:`s` the leg-length ratio and :math:`R_a` the calibration heading: the scaled
+        person of the human-referenced metrics (docs/metrics.md), so a foot put down there has
+        no ankle displacement error, whatever the earlier steps did.
+        """
+        a_r0, a_h0 = self.origin[side]
+        d = self.leg_scale * (self.calibration.rotation @ (np.asarray(ankle, float) - a_h0))
+        return a_r0 + d
+
+    def uncrossed(
+        self, side: str, ankle: np.ndarray, stance: pin.SE3, hips: tuple[np.ndarray, np.ndarray]
+    ) -> np.ndarray:
+        """A swing ankle kept on its side of the standing foot.
+
+        Along the scaled hip line (right hip -> left hip, horizontal), the swing ankle is at
+        least 70 % of the robot's reference stance width to its side of the standing ankle: the
+        feet never cross (a person's crossed feet would put one robot leg through the other).
+        The body's axis, not the standing sole's: a sole turned out in a fighting stance (60 deg
+        on the front kicks) made a kick landing in front of the body count as crossed, and the
+        push put it 0.58 m beside the person's.
+        """
+        axis = np.asarray(hips[0], float) - np.asarray(hips[1], float)
+        axis[2] = 0.0
+        n = float(np.linalg.norm(axis))
+        if not (math.isfinite(n) and n > 1e-6):
+            return ankle
+        lateral = axis / n
+        base = self.feet.ankle_of(_OTHER[side], stance)
+        sign = 1.0 if side == "left" else -1.0
+        lat = float(lateral @ (ankle - base))
+        low = 0.7 * self.width_r
+        if sign * lat >= low:
+            return ankle
+        return ankle + (sign * low - lat) * lateral
 
     def reachable(
         self, side: str, sole: np.ndarray, R: np.ndarray, hip: np.ndarray | None
@@ -269,8 +355,13 @@ class FootTargets:
         standing: tuple[str, ...],
         heights: Mapping[str, float],
         ground: float,
+        heading: tuple[float, float] | None = None,
     ) -> dict[str, pin.SE3]:
         """Place the swing soles (see the module docstring).
+
+        With ``absolute`` the horizontal target is the scaled person's foot in the world
+        (:meth:`absolute_ankle`, kept uncrossed), blended with the stride placement by
+        :meth:`absolute_weight` of ``heading`` (robot heading, person's waist turn [rad]).
 
         Stride beside a standing foot, the person's foot height, within the leg's reach. The
         stride's width is measured across the mean heading of the two soles when they point
@@ -280,6 +371,7 @@ class FootTargets:
         twisted the legs).
         """
         feet = self.feet
+        w_abs = self.absolute_weight(heading)
         for side, d in desired.items():
             p = d.translation.copy()
             other = _OTHER[side]
@@ -291,11 +383,28 @@ class FootTargets:
                 # across the standing sole's (feet turned apart: a karate stance).
                 y1, y2 = yaw_of(soles[other].rotation[:, 0]), yaw_of(d.rotation[:, 0])
                 gap = math.atan2(math.sin(y2 - y1), math.cos(y2 - y1))
-                heading = y1 + 0.5 * gap if abs(gap) <= STRIDE_MEAN_YAW else y1
-                step = self.stride(side, soles[other], a - b, heading)
+                heading_s = y1 + 0.5 * gap if abs(gap) <= STRIDE_MEAN_YAW else y1
+                step = self.stride(side, soles[other], a - b, heading_s)
                 ankle = feet.ankle_of(other, soles[other]) + step
                 if np.all(np.isfinite(ankle)):
                     p[:2] = (ankle + d.rotation @ feet.ankle_to_sole[side])[:2]
+            h = heights.get(side)
+            w = w_abs
+            if h is not None and math.isfinite(h):
+                # High up (a kick) the stride from the standing foot, near the floor (where the
+                # foot lands) the absolute spot: weight 1 up to 5 cm of scaled foot height, 0
+                # from 20 cm (the toes-up band of `pitched`). A kick aimed at the person's
+                # absolute foot stretched the leg forward from a pelvis that leans back, and
+                # reached 0.64-0.70 of the height instead of 0.75.
+                w *= min(1.0, max(0.0, (0.20 - self.leg_scale * h) / 0.15))
+            if w > 0.0 and a is not None and side in self.origin:
+                ankle = self.absolute_ankle(side, a)
+                hips = scaled.get("left_hip"), scaled.get("right_hip")
+                if standing == (other,) and hips[0] is not None and hips[1] is not None:
+                    ankle = self.uncrossed(side, ankle, soles[other], (hips[0], hips[1]))
+                if np.all(np.isfinite(ankle)):
+                    q = (ankle + d.rotation @ feet.ankle_to_sole[side])[:2]
+                    p[:2] = w * q + (1.0 - w) * p[:2]
             h = heights.get(side)
             if h is not None and math.isfinite(h):
                 p[2] = ground + self.leg_scale * h

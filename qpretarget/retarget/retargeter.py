@@ -719,7 +719,7 @@ class Retargeter:
         if self._foot_targets is None:
             self._foot_targets = FootTargets(
                 feet, self._cal, self._leg_scale, self.leg_lengths,
-                self.spec.leg_extension,
+                self.spec.leg_extension, absolute=self._sup.stepping.absolute,
             )  # fmt: skip
         ft = self._foot_targets
 
@@ -727,12 +727,19 @@ class Retargeter:
             return waist_yaw(kp, rots) - self._waist_yaw_cal
 
         desired, human_foot = ft.orient(scaled, kp, soles, waist_dyaw)
+        base = ctrl.state.q
+        yaw = math.atan2(
+            2.0 * (base[6] * base[5] + base[3] * base[4]),
+            1.0 - 2.0 * (base[4] * base[4] + base[5] * base[5]),
+        )  # the floating base's heading (quaternion x, y, z, w at q[3:7])
+        heading = (yaw, waist_dyaw())
         if not stepper.started:
             stepper.reset(t, soles, human_foot)
-            ft.start(kp, soles)
+            ft.start(kp, soles, heading)
         desired = ft.place(
-            desired, scaled, kp, soles, stepper.contacts, self.detector.height, stepper.ground
-        )
+            desired, scaled, kp, soles, stepper.contacts, self.detector.height, stepper.ground,
+            heading,
+        )  # fmt: skip
         before = dict(stepper.states)
         # Heel off: the person's ankle rises over its ground more than the toe does (a foot
         # flat on a raised surface is not a toe-off), scaled.

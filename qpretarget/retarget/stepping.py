@@ -47,7 +47,7 @@ FOOT_STATES = ("stance", "toe_off", "swing", "landing")
 PIVOT_SWING_MAX = 0.25
 
 #: The switches of :class:`StepSettings` (every other setting is a positive number).
-BOOL_SETTINGS = frozenset({"pivot", "initial_stance", "toe_off"})
+BOOL_SETTINGS = frozenset({"pivot", "initial_stance", "toe_off", "absolute"})
 
 
 @dataclass(frozen=True)
@@ -84,6 +84,12 @@ class StepSettings:
             scaled person's feet are, solved to convergence before the first tick,
             :func:`~qpretarget.retarget.feet.initial_soles`) instead of the robot's reference
             posture with the feet side by side.
+        absolute: Swing soles aim at the scaled person's foot positions in the world (each
+            ankle's displacement since the first sample, scaled and turned by the calibration
+            heading, added to the robot ankle's first position: the frame of the human-referenced
+            metrics) instead of the person's stride from the robot's standing foot. A landing
+            that falls short (a kick pulls the pelvis back) is then not carried into every later
+            step (:meth:`~qpretarget.retarget.feet.FootTargets.place`).
     """
 
     clearance: float = 0.02
@@ -103,6 +109,7 @@ class StepSettings:
     toe_pitch: float = 0.6
     toe_time: float = 0.4
     restep: float = 0.05
+    absolute: bool = True
 
     def __post_init__(self) -> None:
         """Validate.

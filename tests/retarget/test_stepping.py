@@ -306,6 +306,10 @@ def test_kicks_lift_the_robot_foot():
     # the ankle pitch stopped at its -0.87 rad limit).
     assert m["swing_height_ratio"]["lifts"] >= 3
     assert m["swing_height_ratio"]["min"] >= 0.7
+    # Ankle displacement error: 0.215 leg lengths measured (0.69 while each landing was placed
+    # by the person's stride from the robot's standing foot: a kick landing 0.5 m short was
+    # carried into every later step). Issue 15 asks 0.10: not met (docs/retargeting.md).
+    assert m["ankle_displacement_error_legs"]["rms"] <= 0.25
     assert m["swing_height_ratio"]["median"] >= 0.7
     assert m["stance_slip_mm"]["max"] < 1.0  # horizontal, as evaluate's foot_slip
     # A kicking sole coming down fast stays above the floor (sole_ground rows: 15 mm under it
@@ -321,12 +325,14 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
     # 19 mm before the sole_ground rows), stance slip < 1 mm (kata 0.51, spin 0.54 measured).
     assert m["sole_below_ground_mm"] < 2.0
     assert m["stance_slip_mm"]["max"] < 1.0
-    # Pelvis height error (kata 10.0, spin 16.8 cm measured; 25 and 28 cm before the person's
-    # ball-of-the-foot stance counted as support; the spin 14.0 cm before re-steps) and heading
+    # Pelvis height error (kata 10.3, spin 18.4 cm measured; 10.0 and 16.8 before the swing
+    # soles aimed at the person's absolute foot spots near the floor; 25 and 28 cm before the
+    # person's ball-of-the-foot stance counted as support; the spin 14.0 cm before re-steps;
+    # the spin's largest error is one spike in a 400 deg/s turn, its RMS 4.7 cm) and heading
     # (spin 67 deg measured, 52 before the foot targets' speed was fed forward, 93 before that;
     # the largest error is a spike in a fast turn; issue 15 asks 20 deg: not met,
     # docs/retargeting.md).
-    assert m["pelvis_height_error_m"]["max"] <= (0.18 if "spin" in clip else 0.15)
+    assert m["pelvis_height_error_m"]["max"] <= (0.20 if "spin" in clip else 0.15)
     if "spin" in clip:
         assert m["heading_error_deg"]["max"] <= 75.0
     else:
@@ -339,6 +345,11 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
 
 def test_both_feet_leave_the_ground_when_the_person_jumps():
     traj, m, ctrl = _run("cgspeed_cmu_01_01_playground_jumps.bvh")
+    # Ankle displacement error (issue 15 asks 0.10 leg lengths): 0.105 measured since the soles
+    # aim at the person's absolute foot spots near the floor (0.26 with the stride from the
+    # standing foot, which carried every short landing into the next steps). Bound 0.12: the
+    # chaotic clip's figure moves by about 0.01 with round-off (kernel vs Python path).
+    assert m["ankle_displacement_error_legs"]["rms"] <= 0.12
     # Flight (both feet up): the robot flies in all but at most one of the person's 12 flights
     # (12/12 with the former 20 self-collision pairs, 11/12 with `pairs: auto`), and for most
     # of the person's flight time (86 % measured: detection delay at take-off and landing).
