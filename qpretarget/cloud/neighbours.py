@@ -11,14 +11,15 @@ points, 3-D and 6-D) pykdtree built and searched in about 0.7 of cKDTree's time
 
 from __future__ import annotations
 
+import importlib
 import os
 from typing import Any
 
 import numpy as np
 
 _PyKDTree: Any
-try:  # optional: a faster exact kd-tree
-    from pykdtree.kdtree import KDTree as _PyKDTree
+try:  # optional: a faster exact kd-tree (imported by name: type-checks with or without it)
+    _PyKDTree = importlib.import_module("pykdtree.kdtree").KDTree
 except ImportError:  # pragma: no cover - depends on the environment
     _PyKDTree = None
 
