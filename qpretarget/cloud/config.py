@@ -195,6 +195,12 @@ class EMConfig:
             that did not, the frame is fitted again from the last such frame's pose and from
             the constant-velocity prediction, and the fit with the lowest NLL (eq. 3) kept.
         reinit_window: frames of the running median of sigma.
+        branch_joints: triples of joint names ``[a, b, c]``, each a chain of three revolute
+            joints with mutually orthogonal axes (a shoulder's pitch, roll, yaw): when a fit
+            leaves one of them within ``BRANCH_MARGIN`` of a limit, the frame is fitted again
+            from the other angles giving the same rotation,
+            :math:`(\theta_a + \pi, \pi - \theta_b, \theta_c + \pi)`, if they are within
+            the limits, and the fit with the lower NLL (eq. 3) kept (``[]``: off).
     """
 
     outlier_weight: float = 0.1
@@ -222,6 +228,7 @@ class EMConfig:
     damping: float = 1.0e-6
     reinit_ratio: float = 0.0
     reinit_window: int = 30
+    branch_joints: list[list[str]] = field(default_factory=list)
 
 
 @dataclass
@@ -304,6 +311,15 @@ def _section(cls: type, spec: Any, path: str) -> Any:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
                 raise ConfigError(f"must be a number >= 0, got {value!r}.", path=f"{path}.{key}")
             value = float(value)
+        elif key == "branch_joints":
+            if not isinstance(value, list) or not all(
+                isinstance(t, list) and len(t) == 3 and all(isinstance(v, str) for v in t)
+                for t in value
+            ):
+                raise ConfigError(
+                    f"must be a list of [a, b, c] joint-name triples, got {value!r}.",
+                    path=f"{path}.{key}",
+                )
         elif key == "centre_joints" and value is not None:
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise ConfigError(

@@ -108,6 +108,9 @@ CONTACT_LENGTH = 0.1
 CALIBRATION_DENSE_SIGMA = 0.03
 #: Largest initial sigma of the calibration [m] (the start pose is already roughly aligned).
 CALIBRATION_SIGMA0 = 0.05
+#: A fit within this distance of a joint limit [rad] tries the other angles of its
+#: ``em.branch_joints`` triple.
+BRANCH_MARGIN = 0.01
 #: The joint pose + centre iterations of a frame stop when no centre moves more than this [m]
 #: (and no joint more than ``em.tolerance``).
 CENTRE_TOLERANCE = 5.0e-4
@@ -456,6 +459,20 @@ def visible_from(
     return r <= front[inv] + tol
 
 
+def _other_angles(th: np.ndarray) -> np.ndarray:
+    r"""The other angles of three orthogonal joints giving the same rotation.
+
+    :math:`(\theta_a + \pi, \pi - \theta_b, \theta_c + \pi)`, each wrapped into
+    :math:`[-\pi, \pi]`.
+    """
+    return _wrap_near(np.array([th[0] + math.pi, math.pi - th[1], th[2] + math.pi]), np.zeros(3))
+
+
+def _wrap_near(x: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Angles ``x`` moved by whole turns to the values nearest ``ref`` (same rotations)."""
+    return x - 2.0 * math.pi * np.round((x - ref) / (2.0 * math.pi))
+
+
 # ------------------------------------------------------------------------------ results
 @dataclass
 class _Trial:
@@ -629,6 +646,9 @@ class CloudRetargeter:
         self._contact_data = self.model.createData()
         self._robot_data = self.robot.model.createData()  # robot_configuration's kinematics
         self._qp_centres: QPProblem | None = None  # built at the first centre stage
+        self._branch_joints: list[tuple[int, np.ndarray]] = []
+        self._branch_data = self.robot.model.createData()
+        self._branches = self._branch_triples(cfg.em.branch_joints)
         self._contact_feet: tuple[str, ...] = ()
         self.reset()
 
@@ -1626,6 +1646,8 @@ class CloudRetargeter:
                 if not ok:
                     status = "relaxed"
         q, sigma2, nll = self._stages(S, Sn, q, sigma2, q_prev, frame, log, centres=True)
+        if self._branches:
+            q, sigma2, nll = self._switch_branches(S, Sn, (q, sigma2, nll), log)
         if self._lost(sigma2):
             q, sigma2, nll = self._reinitialise(S, Sn, (q, sigma2, nll), log)
         else:
@@ -1767,6 +1789,147 @@ class CloudRetargeter:
             log.extend(trial_log)
             if cand[2] < best[2]:
                 best = cand
+        return best
+
+    def _branch_triples(self, spec: list[list[str]]) -> list[np.ndarray]:
+        r"""Configuration indices (3,) of each ``em.branch_joints`` triple, checked.
+
+        Each must be a chain a -> b -> c of one-DoF joints with b orthogonal to a and c
+        (within 0.05 in their cosines): then a second set of angles gives the same rotation
+        (:meth:`_other_branch`). Returns the configuration indices; the triple's joint ids
+        and velocity indices are kept in ``self._branch_joints``.
+        """
+        robot, model = self.robot, self.robot.model
+        out: list[np.ndarray] = []
+        if not spec:
+            return out
+        data = model.createData()
+        pin.computeJointJacobians(model, data, robot.q_reference)
+        for k, names in enumerate(spec):
+            path = f"em.branch_joints[{k}]"
+            for n in names:
+                robot.joint_index(n, path=path)  # a clear error for an unknown name
+            js = [model.getJointId(n) for n in names]
+            if any(model.joints[j].nv != 1 for j in js) or not (
+                model.parents[js[1]] == js[0] and model.parents[js[2]] == js[1]
+            ):
+                raise ConfigError(
+                    f"{names} must be three one-DoF joints, each the child of the one before.",
+                    path=path,
+                )
+            axes = [
+                pin.getJointJacobian(model, data, j, pin.ReferenceFrame.WORLD)[
+                    3:, model.joints[j].idx_v
+                ]
+                for j in js
+            ]
+            cos = [abs(float(axes[a] @ axes[b])) for a, b in ((0, 1), (1, 2))]
+            if max(cos) > 0.05:
+                raise ConfigError(
+                    f"the middle joint's axis of {names} is not orthogonal to the others "
+                    f"(cosines {np.round(cos, 3).tolist()}): no second set of angles gives the "
+                    "same rotation.",
+                    path=path,
+                )
+            out.append(np.array([model.joints[j].idx_q for j in js]))
+            self._branch_joints.append((js[2], np.array([model.joints[j].idx_v for j in js])))
+        return out
+
+    def _other_branch(self, q: np.ndarray, k: int, *, limits: bool = True) -> np.ndarray | None:
+        r"""The other angles of triple k giving its last joint the same rotation, or None.
+
+        Start: :math:`(\theta_a + \pi, \pi - \theta_b, \theta_c + \pi)`, exact when the
+        three axes are mutually orthogonal; then Gauss-Newton on
+        :math:`\log(R(\theta)^\top R(\theta_{fit}))` (G1's shoulder pitch axis is tilted by
+        16 deg from the plane normal to its yaw axis, which moves the start's elbow by 11 cm).
+        None when it does not converge (1e-8 rad) or (``limits``) leaves the joint limits.
+        """
+        idx = self._branches[k]
+        jc, iv = self._branch_joints[k]
+        model, data = self.robot.model, self._branch_data
+        pin.forwardKinematics(model, data, q)
+        target = data.oMi[jc].rotation.copy()
+        x = _other_angles(q[idx])
+        qq = q.copy()
+        for _ in range(20):
+            qq[idx] = x
+            pin.computeJointJacobians(model, data, qq)
+            r = pin.log3(data.oMi[jc].rotation.T @ target)
+            if float(np.linalg.norm(r)) < 1e-8:
+                break
+            J = pin.getJointJacobian(model, data, jc, pin.ReferenceFrame.LOCAL)[3:, iv]
+            x = x + np.linalg.lstsq(J, r, rcond=None)[0]
+        else:
+            return None
+        lo, hi = self.robot.q_min[idx], self.robot.q_max[idx]
+        if not limits:
+            return x
+        x = _wrap_near(x, 0.5 * (lo + hi))  # into the limits' window where it can be
+        if np.all(x >= lo) and np.all(x <= hi) and np.max(np.abs(x - q[idx])) > 1e-3:
+            return x
+        return None
+
+    def _switch_branches(
+        self,
+        S: np.ndarray,
+        Sn: np.ndarray | None,
+        fit: tuple[np.ndarray, float, float],
+        log: list[IterationLog],
+    ) -> tuple[np.ndarray, float, float]:
+        """Fit again from the other angles of a triple stuck at a limit; keep the lower NLL.
+
+        A shoulder of three orthogonal joints reaches most arm directions with two sets of
+        angles. Tracking follows one of them continuously; when the arm moves where that set
+        runs into a joint limit (the arm raised beside the head, CMU 14_07: G1's shoulder roll
+        at -2.25 rad, the upper arm 30 deg off the person's) while the other set is free, the
+        EM cannot get there through the limit. Each triple with a joint within
+        ``BRANCH_MARGIN`` of a limit gets a start with its other angles (the rest of the
+        fitted pose kept), fitted by the linear and refinement stages with the temporal term
+        towards that start (no centre stage), compared by the NLL of eq. 3. When a start
+        wins, the pose history is mapped to the same angles so that the prediction goes on
+        from them.
+        """
+        em = self.config.em
+        best = fit
+        for k, idx in enumerate(self._branches):
+            q = best[0]
+            th = q[idx]
+            lo, hi = self.robot.q_min[idx], self.robot.q_max[idx]
+            if not np.any((th - lo < BRANCH_MARGIN) | (hi - th < BRANCH_MARGIN)):
+                continue
+            alt = self._other_branch(q, k)
+            if alt is None:
+                continue
+            q0 = q.copy()
+            q0[idx] = alt
+            if self.stability_mode == "qp":
+                q0, _ = self._restore_balance(q0)
+            q_prev = q0.copy() if em.temporal_reference == "prediction" else self.history[-1]
+            trial_log: list[IterationLog] = []
+            cand = self._stages(
+                S,
+                Sn,
+                q0,
+                em.sigma2_init,
+                q_prev,
+                None,
+                trial_log,
+                centres=False,
+                tag=f"branch{k}-",
+            )
+            log.extend(trial_log)
+            if cand[2] < best[2]:
+                best = cand
+                # Newest first, each wrapped next to the newer one: a continuous history.
+                ref = cand[0][idx]
+                for i in range(len(self.history) - 1, -1, -1):
+                    alt_h = self._other_branch(self.history[i], k, limits=False)
+                    if alt_h is None:
+                        del self.history[: i + 1]  # older poses: not mapped, not used
+                        break
+                    ref = _wrap_near(alt_h, ref)
+                    self.history[i] = self.history[i].copy()
+                    self.history[i][idx] = ref
         return best
 
     # ------------------------------------------------------------------ a sequence

@@ -258,3 +258,47 @@ def test_e_step_caches_follow_changed_inputs():
     again = e_step(S, V, active, 0.004, 0.1, pairs=pairs)
     assert again.nll == fresh.nll  # same operations on the same values: bit for bit
     assert np.array_equal(again.P1, fresh.P1) and np.array_equal(again.Px, fresh.Px)
+
+
+SHOULDERS = [
+    [f"{s}_shoulder_{j}_joint" for j in ("pitch", "roll", "yaw")] for s in ("left", "right")
+]
+
+
+def test_other_shoulder_branch_gives_the_same_rotation(g1, g1_template):
+    """``em.branch_joints``: G1's right shoulder with its roll at the limit (the arm raised
+    beside the head, as fitted on CMU 14_07) has a second set of angles, within the limits,
+    giving the upper arm the same orientation (Gauss-Newton to 1e-8 rad; checked to 1e-9)."""
+    fit = CloudRetargeter(
+        {"robot": "g1", "calibration": {"enabled": False}, "em": {"branch_joints": SHOULDERS}},
+        robot=g1,
+        template=g1_template,
+    )
+    model, data = g1.model, g1.model.createData()
+    joints = [model.getJointId(n) for n in SHOULDERS[1]]
+    idx = [model.joints[j].idx_q for j in joints]
+    q = g1.q_reference.copy()
+    q[idx] = [0.81, -2.25, -1.83]  # roll at its limit
+    alt = fit._other_branch(q, 1)
+    assert alt is not None
+    assert np.all(alt >= g1.q_min[idx]) and np.all(alt <= g1.q_max[idx])
+    assert np.max(np.abs(alt - q[idx])) > 1.0  # another branch, not the same angles
+    pin.forwardKinematics(model, data, q)
+    R = data.oMi[joints[2]].rotation.copy()
+    q2 = q.copy()
+    q2[idx] = alt
+    pin.forwardKinematics(model, data, q2)
+    assert np.allclose(data.oMi[joints[2]].rotation, R, atol=1e-9)
+
+
+def test_branch_joints_are_checked(g1, g1_template):
+    """A triple that is not a chain of three one-DoF joints is refused with its YAML path."""
+    from qpretarget.errors import ConfigError
+
+    bad = [["left_shoulder_pitch_joint", "left_elbow_joint", "left_shoulder_yaw_joint"]]
+    with pytest.raises(ConfigError, match=r"em\.branch_joints\[0\]"):
+        CloudRetargeter(
+            {"robot": "g1", "calibration": {"enabled": False}, "em": {"branch_joints": bad}},
+            robot=g1,
+            template=g1_template,
+        )
