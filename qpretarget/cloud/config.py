@@ -126,6 +126,9 @@ class CalibrationConfig:
             from segment-length fractions of the standing height (Winter's table,
             :mod:`qpretarget.cloud.anthropometry`), placed along each limb of the calibrated
             template from the fingertips (arms) or the floor (legs).
+        centre_symmetric: one offset for each left/right pair of articulations (with
+            ``centre_axes: limb``): a person's left and right joint centres sit alike, and
+            each side's frames then inform both.
     """
 
     enabled: bool = True
@@ -147,6 +150,7 @@ class CalibrationConfig:
     centre_axes: str = "limb"
     centre_rate: float | None = 10.0
     centre_model: str = "robot"
+    centre_symmetric: bool = False
 
 
 @dataclass

@@ -1347,6 +1347,8 @@ class CloudRetargeter:
             for a in range(T.n_centres):
                 U[3 * a : 3 * a + 3, a] = ax[a]
             U = U[:, inner]
+            if cal.centre_symmetric:
+                U = self._symmetric_basis(U, np.flatnonzero(inner))
         else:
             U = np.eye(3 * T.n_centres)[:, np.repeat(inner, 3)]
         self._centre_basis = U
@@ -1365,14 +1367,43 @@ class CloudRetargeter:
             offsets = anthropometric_offsets(T, points, height, ax)
             along = np.clip(np.einsum("ab,ab->a", offsets, ax), -cal.centre_bound, cal.centre_bound)
             full = (along[:, None] * ax).reshape(-1)
-            if self._estimate_centres:
-                self._centre_mean = U.T @ full
+            if self._estimate_centres:  # least squares: the mean of paired sides
+                self._centre_mean = np.linalg.solve(U.T @ U, U.T @ full)
             self._centre_base = full - U @ self._centre_mean
             self._apply_centres(self._centre_mean)
         self._centre_info = np.eye(nc) / max(cal.centre_prior, 1e-9) ** 2
         self.calibration_sigma2 = sigma2
         self.calibrated = True
         return q
+
+    def _symmetric_basis(self, U: np.ndarray, arts: np.ndarray) -> np.ndarray:
+        """Limb basis with one column per left/right pair of articulations (``centre_symmetric``).
+
+        Column c of ``U`` moves articulation ``arts[c]`` along its limb; the columns of
+        ``left_...`` and ``right_...`` joints of the same name are added: one offset along
+        both limbs, whose prior standard deviation stays ``centre_prior``.
+        """
+        T = self.template
+        names = [T.model.names[int(max(T.articulations[int(a)]))] for a in arts]
+        cols, used = [], set()
+        for c, name in enumerate(names):
+            if c in used:
+                continue
+            col = U[:, c].copy()
+            if name.startswith("left_"):
+                twin = "right_" + name[len("left_") :]
+                if twin in names:
+                    t = names.index(twin)
+                    col += U[:, t]
+                    used.add(t)
+            elif name.startswith("right_"):
+                twin = "left_" + name[len("right_") :]
+                if twin in names and names.index(twin) not in used:
+                    t = names.index(twin)
+                    col += U[:, t]
+                    used.add(t)
+            cols.append(col)
+        return np.stack(cols, axis=1) if cols else U
 
     def _calibration_phase(
         self,

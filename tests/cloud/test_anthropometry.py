@@ -83,3 +83,19 @@ def test_offsets_lie_along_the_limbs(both):
             assert np.linalg.norm(off[a]) <= 1e-3, (name, off[a])
         if "elbow" in name or "wrist" in name:
             assert np.linalg.norm(off[a]) >= 0.02, (name, off[a])
+
+
+def test_symmetric_centres_share_one_offset_per_pair(both):
+    """``centre_symmetric`` (shipped): the estimated shoulders and elbows are two offsets, each
+    moving the left and the right articulation by the same distance along its own limb."""
+    _, (fitter, _) = both
+    T = fitter.template
+    U = fitter._centre_basis
+    axes, _ = T.limb_axes()
+    assert U.shape[1] == 2
+    names = [T.model.names[int(max(g))] for g in T.articulations]
+    for c in range(2):
+        moved = [a for a in range(T.n_centres) if np.linalg.norm(U[3 * a : 3 * a + 3, c]) > 0]
+        assert sorted(names[a].split("_")[0] for a in moved) == ["left", "right"]
+        for a in moved:  # unit distance along the limb (exact: the axes themselves)
+            np.testing.assert_allclose(U[3 * a : 3 * a + 3, c], axes[a], atol=1e-15)
