@@ -8,7 +8,8 @@ per frame and iterations, with the machine and versions (``--profile N``: the E-
 the N costliest functions; the run is then profiled, and its times are slower; ``--stages``: CPU
 milliseconds per frame spent in each stage of the fit and in the kd-tree searches, measured by
 timers around those functions, which add about 1 ms per frame; the 3-D searches include the
-cloud normals' own).
+cloud normals' own). The k-nearest-neighbour searches use pykdtree when it is installed
+(``versions.knn`` in the output); ``QPRETARGET_KNN=scipy`` forces scipy's cKDTree.
 
 With ``--clip`` the human model follows a mocap clip at 30 Hz instead (the issue's figure: CMU
 14_37 drink, 2,500 cloud points), fitted with the shipped ``configs/cloud_g1.yaml`` (calibration

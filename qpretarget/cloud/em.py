@@ -1101,7 +1101,9 @@ class CloudRetargeter:
         chain, wrists and ankles, whose short end segment shows them poorly) are static
         parameters :math:`e` of the subject; frame after frame they get a Gaussian estimate
         :math:`(\hat e, \Lambda)`
-        (start: 0 and :math:`I/\sigma_e^2`, ``calibration.centre_prior``). Each M-step solves
+        (start: 0, or the anthropometric offsets with ``calibration.centre_model``, and
+        :math:`I/\sigma_e^2`, ``calibration.centre_prior``; with ``centre_symmetric`` a
+        left/right pair shares one offset). Each M-step solves
         the pose step and the offset step in one QP, the objective gaining
         :math:`\tfrac12 (e - \hat e)^\top \Lambda (e - \hat e)`; steps are accepted by the
         rule of :meth:`_em_stage`. Then :math:`\hat e = e` and :math:`\Lambda` gains this
