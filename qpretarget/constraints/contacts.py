@@ -26,6 +26,18 @@ where :math:`\alpha_f = \dot J_f v` is the frame's classical acceleration at zer
 (pinocchio ``getFrameClassicalAcceleration``), evaluated with the previous tick's velocity (exact
 when the velocity does not change; with ``acceleration_limits`` the change per tick is bounded).
 
+A *moving* anchor (:meth:`Contacts.set_anchor` with ``moving=True``: a stance foot pivoting in
+place, its anchor turned a little every tick) has its step over the tick,
+:math:`\delta_f = [p_a - p_a^-;\ R_a^- \log_3(R_a^{-\top} R_a)]`, fed forward outside the
+correction caps:
+
+.. math:: J_f\, v = \delta_f / dt + \operatorname{cap}\big(K (e_f - \delta_f)\big)
+    \;[- \tfrac{dt}{2} \alpha_f],
+
+so a pivot is followed at its own rate (with the caps alone a 400 deg/s pivot was followed at
+the angular cap), while the residual error is still corrected gently. Without a step
+(:math:`\delta_f = 0`) this is the row above.
+
 The block always has ``6 * n_feet`` rows; an inactive foot's rows are zero with infinite bounds, so
 switching contacts never changes the QP's shape.
 """
@@ -142,6 +154,7 @@ class Contacts(Constraint):
         self._active = np.zeros(0, dtype=bool)
         self._anchor_p = np.zeros((0, 3))
         self._anchor_R = np.zeros((0, 3, 3))
+        self._anchor_step = np.zeros((0, 6))
         #: Incremented whenever the active set or an anchor changes (listeners compare it).
         self.version = 0
 
@@ -215,6 +228,7 @@ class Contacts(Constraint):
         self._active = np.zeros(n, dtype=bool)
         self._anchor_p = np.zeros((n, 3))
         self._anchor_R = np.tile(np.eye(3), (n, 1, 1))
+        self._anchor_step = np.zeros((n, 6))
         self._C = np.zeros((self.n_rows, robot.nv))
         self._l = np.full(self.n_rows, -np.inf)
         self._u = np.full(self.n_rows, np.inf)
@@ -241,6 +255,7 @@ class Contacts(Constraint):
         M = state.frame_placement(self.frame_ids[i])
         self._anchor_p[i] = M.translation
         self._anchor_R[i] = M.rotation
+        self._anchor_step[i] = 0.0
 
     def reset(self, state: RobotState) -> None:
         """Activate the configured contacts, anchored at their current poses."""
@@ -269,16 +284,22 @@ class Contacts(Constraint):
         self._active[...] = new
         self.version += 1
 
-    def set_anchor(self, foot: str, pose: Any) -> None:
+    def set_anchor(self, foot: str, pose: Any, *, moving: bool = False) -> None:
         """Move the anchor of contact ``foot`` (e.g. to a planned footstep pose).
 
         The drift correction then pulls the sole there at the rate of :attr:`gain` (a far anchor
         is a contact set that cannot be kept this tick: the relaxation reports it). Listeners
         (the support polygon) see the change through :attr:`version`.
 
+        With ``moving`` the anchor moves continuously (a stance foot pivoting in place, a small
+        step every tick): its step from the previous anchor is fed forward this tick, outside
+        the correction caps (module docstring); it holds until the next ``set_anchor`` of this
+        foot or :meth:`clear_anchor_steps`.
+
         Args:
             foot: contact name.
             pose: ``pinocchio.SE3`` or 4x4 homogeneous transform of the sole in the world.
+            moving: feed the anchor's step forward (see above).
 
         Raises:
             UnknownNameError: unknown contact. ConfigError: a malformed pose.
@@ -295,9 +316,19 @@ class Contacts(Constraint):
             R, p = T[:3, :3], T[:3, 3]
         if not np.allclose(R.T @ R, np.eye(3), atol=1e-6):
             raise ConfigError("anchor rotation must be orthonormal.")
+        if moving:
+            R0 = self._anchor_R[i]
+            self._anchor_step[i, :3] = p - self._anchor_p[i]
+            self._anchor_step[i, 3:] = R0 @ pin.log3(R0.T @ R)
+        else:
+            self._anchor_step[i] = 0.0
         self._anchor_R[i] = R
         self._anchor_p[i] = p
         self.version += 1
+
+    def clear_anchor_steps(self) -> None:
+        """Stop feeding every anchor's last step forward (the anchors stay where they are)."""
+        self._anchor_step[...] = 0.0
 
     def anchor_pose(self, foot: str) -> pin.SE3:
         """World pose of the anchor of contact ``foot`` (meaningful while it is active)."""
@@ -346,7 +377,7 @@ class Contacts(Constraint):
         tick.add_contacts(
             row, list(self.frame_ids), -1.0 if self.gain is None else self.gain,
             self.second_order, self.max_correction[0], self.max_correction[1], self._active,
-            self._anchor_p, self._anchor_R,
+            self._anchor_p, self._anchor_R, self._anchor_step,
         )  # fmt: skip
         return True
 
@@ -370,8 +401,14 @@ class Contacts(Constraint):
             M = state.frame_placement(fid)
             R = M.rotation
             C[r0 : r0 + 6] = state.frame_jacobian(fid)
-            lin = k * (self._anchor_p[i] - M.translation)
+            step = self._anchor_step[i]
+            moving = bool(step.any())
+            lin = self._anchor_p[i] - M.translation
             ang = R @ pin.log3(R.T @ self._anchor_R[i])
+            if moving:
+                lin = lin - step[:3]
+                ang = ang - step[3:]
+            lin *= k
             ang *= k
             n2 = lin.dot(lin)
             if n2 > cap_lin2:
@@ -379,6 +416,9 @@ class Contacts(Constraint):
             n2 = ang.dot(ang)
             if n2 > cap_ang2:
                 ang *= self.max_correction[1] / np.sqrt(n2)
+            if moving:
+                lin += step[:3] / dt
+                ang += step[3:] / dt
             lo[r0 : r0 + 3] = lin
             lo[r0 + 3 : r0 + 6] = ang
             if drift:

@@ -166,11 +166,13 @@ class FootTargets:
         return out if math.isfinite(out) else 0.0
 
     def foot_yaw(self, side: str, kp: Mapping[str, np.ndarray]) -> tuple[float | None, bool]:
-        """The person's foot yaw (ankle -> toe) and whether the foot is flat.
+        """The person's foot yaw (ankle -> toe) and whether it is measured now.
 
         A foot pointing down (its ankle-toe vector's horizontal part under 80 % of the
-        calibration length: toe-off, a kick) has no reliable yaw: the last reliable one is kept.
-        Flat means over 90 % (a pivot is only detected on a flat foot).
+        calibration length: a kick, a toe stand) has no reliable yaw: the last reliable one is
+        kept and the flag is ``False`` (pivots are detected on measured yaws only: flat feet
+        and feet on their ball, heel up to about 35 deg; with flat feet only, 90 %, a dancer
+        turning on the ball of the foot never pivoted).
         """
         toe, ankle = kp.get(f"{side}_toe"), kp.get(f"{side}_ankle")
         length = self.toe_length.get(side)
@@ -182,7 +184,7 @@ class FootTargets:
             return self._last_yaw.get(side), False
         if ratio >= 0.8:
             self._last_yaw[side] = yaw_of(d)
-        return self._last_yaw.get(side), ratio >= 0.9
+        return self._last_yaw.get(side), ratio >= 0.8
 
     def stride(
         self, side: str, stance: pin.SE3, human: np.ndarray, heading: float | None = None
@@ -326,16 +328,21 @@ class FootTargets:
     ) -> tuple[dict[str, pin.SE3], dict[str, tuple[float, np.ndarray] | None]]:
         """Swing-sole poses at the scaled ankles, with the feet's yaw.
 
-        Also ``(yaw, scaled ankle)`` of each flat person's foot (for pivots; else ``None``).
+        Also ``(yaw, points)`` of each person's foot whose yaw is measured now (for pivots;
+        else ``None``): its ankle and toe times the leg-length ratio (their displacements are
+        the scaled person's; a ball-of-the-foot pivot keeps the toe in place, a heel pivot the
+        ankle).
         """
         feet, cal = self.feet, self.calibration
         desired = {s: feet.swing_sole(s, scaled, kp, cal, soles[s], waist_dyaw) for s in SIDES}
         human_foot: dict[str, tuple[float, np.ndarray] | None] = {}
         for s in SIDES:
-            yaw, flat = self.foot_yaw(s, kp)
-            a_s = scaled.get(f"{s}_ankle")
-            ok = yaw is not None and flat and a_s is not None and bool(np.all(np.isfinite(a_s)))
-            human_foot[s] = (yaw, a_s) if ok and yaw is not None and a_s is not None else None
+            yaw, measured = self.foot_yaw(s, kp)
+            pts = [kp.get(f"{s}_{p}") for p in ("ankle", "toe")]
+            found = [np.asarray(p, float) for p in pts if p is not None]
+            xy = self.leg_scale * np.array(found) if found else None
+            ok = yaw is not None and measured and xy is not None and bool(np.all(np.isfinite(xy)))
+            human_foot[s] = (yaw, xy) if ok and yaw is not None and xy is not None else None
             if yaw is not None and s in cal.human_foot_yaw:
                 dpsi = yaw - cal.human_foot_yaw[s]
                 base = waist_dyaw()

@@ -736,10 +736,19 @@ class Retargeter:
         if not stepper.started:
             stepper.reset(t, soles, human_foot)
             ft.start(kp, soles, heading)
+        heights = dict(self.detector.height)
+        if self.detector.flight:
+            # In flight the soles rise with the person's ankles, not with the lowest foot point:
+            # a jumping person points the feet (toes 10-15 cm under the ankles), a flat robot
+            # sole at the toes' height held its pelvis 15-17 cm under the person's at every
+            # apex of the playground jumps (the legs at full reach).
+            for side in SIDES:
+                h = self.detector.point_height.get(side) or []
+                if f"{side}_ankle" in kp and h and math.isfinite(h[0]):
+                    heights[side] = max(heights[side], h[0])
         desired = ft.place(
-            desired, scaled, kp, soles, stepper.contacts, self.detector.height, stepper.ground,
-            heading,
-        )  # fmt: skip
+            desired, scaled, kp, soles, stepper.contacts, heights, stepper.ground, heading
+        )
         before = dict(stepper.states)
         # Heel off: the person's ankle rises over its ground more than the toe does (a foot
         # flat on a raised surface is not a toe-off), scaled.
@@ -758,8 +767,9 @@ class Retargeter:
                 ft.touched_down(side, kp)
         if cmd.switched:
             ctrl.set_contacts([self._sup.feet[s].contact for s in cmd.contacts])
+        self._con.clear_anchor_steps()
         for side, anchor in cmd.anchors.items():
-            self._con.set_anchor(self._sup.feet[side].contact, anchor)
+            self._con.set_anchor(self._sup.feet[side].contact, anchor, moving=side in cmd.pivoting)
         return cmd
 
     def _ramp(self, t: float) -> float:

@@ -8,8 +8,9 @@ at; :class:`Rooting` scales the person from it (Poubel 2014 eq. 1,
 
 * when the root changes, the waist offset between the old and the new root's scaling decays
   over ``scaling.blend_time`` (minimum jerk);
-* in flight (kinematic mode) the waist moves from where it left the ground like the person's,
-  times the calibration's root scale;
+* in flight (kinematic mode) the waist moves horizontally from where it left the ground like the
+  person's, times the calibration's root scale, and its height is the person's change of height
+  since calibration times the leg-length ratio (as in single support);
 * in kinematic single support the pelvis height is the person's change of height since
   calibration times the leg-length ratio, from the robot's waist height at the start of the run
   (:attr:`Rooting.waist_height`; the chain from the support foot places it horizontally);
@@ -115,6 +116,15 @@ class Rooting:
         if root == "flight" and self.flight_root is not None:
             w_r, w_h = self.flight_root
             waist = w_r + cal.root_scale * (cal.rotation @ (human["waist"] - w_h))
+            if self.kinematic:
+                # Height: the person's since calibration times the leg-length ratio, as in
+                # single support, not from where the robot left the ground: a hop starts on the
+                # ball of the foot, the robot's flat sole with its leg at full reach leaves
+                # 12-15 cm lower, and the whole flight kept that offset (root height 18-22 cm
+                # off on the playground jumps, landings with a knee 3 cm over the floor).
+                waist[2] = self.waist_height + self.leg_scale * (
+                    human["waist"][2] - cal.human_waist[2]
+                )
             if np.all(np.isfinite(waist)):
                 return self.scaler.scale_rooted(human, "waist", waist)
         scaled = self.scaler.scale(human, support=root, anchors=anchors)

@@ -228,7 +228,7 @@ struct ContactsK {
   double gain = -1.0;
   bool second_order = true;
   double cap_lin = 0.5, cap_ang = 2.0;
-  Buf active_b, anchor_p, anchor_R;  // the Python constraint's arrays (modified in place there)
+  Buf active_b, anchor_p, anchor_R, anchor_step;  // the Python constraint's arrays (in place)
   bool *active = nullptr;
   Mat6x J6;
   void compute(const Model &m, Data &d, Data &vd, bool &vd_ready, const Eigen::VectorXd &q,
@@ -261,14 +261,25 @@ struct ContactsK {
       C.block(r0, 0, 6, m.nv) = J6;
       Eigen::Map<const Eigen::Vector3d> pa(anchor_p.p + 3 * i);
       Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> Ra(anchor_R.p + 9 * i);
-      Eigen::Vector3d lin = k * (pa - M.translation());
+      Eigen::Map<const Eigen::Matrix<double, 6, 1>> step(anchor_step.p + 6 * i);
+      bool moving = !step.isZero(0.0);  // a moving anchor's step: fed forward, not capped
+      Eigen::Vector3d lin = pa - M.translation();
       Eigen::Matrix3d Rrel = R.transpose() * Ra;
       Eigen::Vector3d ang = R * pinocchio::log3(Rrel);
+      if (moving) {
+        lin -= step.head<3>();
+        ang -= step.tail<3>();
+      }
+      lin *= k;
       ang *= k;
       double n2 = lin.dot(lin);
       if (n2 > cl2) lin *= cap_lin / std::sqrt(n2);
       n2 = ang.dot(ang);
       if (n2 > ca2) ang *= cap_ang / std::sqrt(n2);
+      if (moving) {
+        lin += step.head<3>() / dt;
+        ang += step.tail<3>() / dt;
+      }
       for (int j = 0; j < 3; ++j) {
         l[r0 + j] = lin[j];
         l[r0 + 3 + j] = ang[j];
@@ -1142,7 +1153,7 @@ struct Tick {
     bounds.push_back(std::move(b));
   }
   void add_contacts(int row, std::vector<int> fids, double gain, bool second_order, double cap_lin,
-                    double cap_ang, BArr active, Arr anchor_p, Arr anchor_R) {
+                    double cap_ang, BArr active, Arr anchor_p, Arr anchor_R, Arr anchor_step) {
     ContactsK c;
     c.row = row;
     c.fids = fids;
@@ -1154,6 +1165,7 @@ struct Tick {
     c.active = active.data();
     c.anchor_p = Buf(anchor_p);
     c.anchor_R = Buf(anchor_R);
+    c.anchor_step = Buf(anchor_step);
     contacts.push_back(std::move(c));
   }
 

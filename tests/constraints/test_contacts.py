@@ -77,6 +77,31 @@ def test_drift_correction_pulls_the_sole_onto_a_moved_anchor(g1, make_config) ->
     assert np.linalg.norm(pin.log3(target.rotation.T @ M.rotation)) < 1e-5
 
 
+def test_a_moving_anchor_is_fed_forward_outside_the_correction_caps(g1, make_config) -> None:
+    """A pivot: the anchor turned by 0.06 rad about z, ``moving=True``. The rows ask for the
+    whole step over one tick (6 rad/s) though the angular cap is 0.5 rad/s, plus the capped
+    correction of the error left at the previous anchor (none here); without ``moving`` the
+    same anchor is approached at the cap. Then the step is cleared: the rows are the plain
+    correction again. Exact arithmetic on the same numbers: 1e-12."""
+    ctrl = _ctrl(g1, make_config, a_max=None, polygon=False)
+    con = ctrl.constraint("contacts")
+    con.max_correction = (0.1, 0.5)
+    fid = con.frame_ids[0]
+    M = ctrl.state.frame_placement(fid)
+    turned = pin.SE3(pin.exp3(np.array([0.0, 0.0, 0.06])) @ M.rotation, M.translation.copy())
+    con.set_anchor("left_foot", turned, moving=True)
+    blk = con.compute_rows(ctrl.state, ctrl.dt)
+    np.testing.assert_allclose(blk.l[:3], 0.0, atol=1e-12)
+    np.testing.assert_allclose(blk.l[3:6], [0.0, 0.0, 0.06 / ctrl.dt], atol=1e-9)
+    con.set_anchor("left_foot", turned)  # not moving: capped at 0.5 rad/s
+    blk = con.compute_rows(ctrl.state, ctrl.dt)
+    np.testing.assert_allclose(np.linalg.norm(blk.l[3:6]), 0.5, atol=1e-12)
+    con.set_anchor("left_foot", turned, moving=True)
+    con.clear_anchor_steps()
+    blk2 = con.compute_rows(ctrl.state, ctrl.dt)
+    np.testing.assert_array_equal(blk.l, blk2.l)
+
+
 def test_switching_anchors_the_new_foot_where_it_is(g1, make_config) -> None:
     ctrl = _ctrl(g1, make_config, polygon=False)
     con = ctrl.constraint("contacts")
