@@ -446,6 +446,12 @@ class CloudConfig:
                 f"must be > 0 [Hz] or null (every frame), got {cal.centre_rate!r}.",
                 path="calibration.centre_rate",
             )
+        if cal.centre_symmetric and cal.centre_axes != "limb":
+            raise ConfigError(
+                "one offset for a left/right pair moves both along their limbs: use "
+                "centre_axes: limb with centre_symmetric: true (or centre_symmetric: false).",
+                path="calibration.centre_symmetric",
+            )
 
 
 __all__ = [

@@ -99,3 +99,12 @@ def test_symmetric_centres_share_one_offset_per_pair(both):
         assert sorted(names[a].split("_")[0] for a in moved) == ["left", "right"]
         for a in moved:  # unit distance along the limb (exact: the axes themselves)
             np.testing.assert_allclose(U[3 * a : 3 * a + 3, c], axes[a], atol=1e-15)
+
+
+def test_symmetric_centres_need_limb_axes():
+    """One clear error for a combination that has no meaning (a pair's offset is along limbs)."""
+    from qpretarget.errors import ConfigError
+
+    spec = {"calibration": {"centre_symmetric": True, "centre_axes": "free"}}
+    with pytest.raises(ConfigError, match="centre_axes: limb"):
+        CloudConfig.from_dict(spec)
