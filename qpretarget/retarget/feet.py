@@ -16,7 +16,7 @@ have if it swings (docs/retargeting.md, section 4b):
 * vertically :math:`s` times the person's foot height (the detector's: the lowest foot
   key-point above its ground);
 * the yaw of the person's foot (ankle -> toe), kept while the foot points down, within
-  :data:`FOOT_YAW_RANGE` of the waist's turn;
+  :data:`FOOT_YAW_RANGE` of the waist's turn, turning at most :data:`FOOT_YAW_RATE`;
 * pulled within the leg's reach of the scaled hip (:meth:`FootTargets.reachable`).
 """
 
@@ -35,6 +35,13 @@ from .support import FootSupport, rot_z
 #: Largest yaw of a swinging sole from the person's waist turn [rad] (a foot held up behind,
 #: sole up, points backwards: followed, it would twist the hip to its limit).
 FOOT_YAW_RANGE = 0.8
+
+#: Largest turn rate of a swing sole's yaw target [rad/s] (690 deg/s, the stance pivots' rate
+#: in the G1 config). The person's foot yaw is kept while the foot points down and taken again
+#: when it is level: on the dance spin it came back 97 deg away in one sample, and in flight the
+#: robot turned its whole body 40 deg in one tick to follow the sole (the base has no
+#: acceleration limit, the hip yaw has).
+FOOT_YAW_RATE = 12.0
 
 _OTHER = {"left": "right", "right": "left"}
 
@@ -70,8 +77,12 @@ class FootTargets:
         leg_extension: float,
         *,
         absolute: bool = False,
+        dt: float = 0.01,
     ) -> None:
         self.feet = feet
+        self.dt = float(dt)
+        #: side -> last yaw change of the swing-sole target since calibration [rad], unwrapped.
+        self._yaw_target: dict[str, float] = {}
         self.absolute = absolute
         #: side -> (robot ankle, person's ankle) at the first sample (``absolute`` placement).
         self.origin: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -349,6 +360,12 @@ class FootTargets:
                 off = math.atan2(math.sin(dpsi - base), math.cos(dpsi - base))
                 off = max(-FOOT_YAW_RANGE, min(FOOT_YAW_RANGE, off))
                 dpsi = base + off
+                last = self._yaw_target.get(s)
+                if last is not None:
+                    lim = FOOT_YAW_RATE * self.dt
+                    step = math.atan2(math.sin(dpsi - last), math.cos(dpsi - last))
+                    dpsi = last + max(-lim, min(lim, step))
+                self._yaw_target[s] = dpsi
                 R = rot_z(dpsi) @ feet.sole_ref[s].rotation
                 desired[s] = pin.SE3(R, desired[s].translation)
         return desired, human_foot
@@ -470,4 +487,4 @@ def initial_soles(
     return out
 
 
-__all__ = ["FOOT_YAW_RANGE", "INITIAL_STRIDE", "FootTargets", "initial_soles"]
+__all__ = ["FOOT_YAW_RANGE", "FOOT_YAW_RATE", "INITIAL_STRIDE", "FootTargets", "initial_soles"]

@@ -719,7 +719,7 @@ class Retargeter:
         if self._foot_targets is None:
             self._foot_targets = FootTargets(
                 feet, self._cal, self._leg_scale, self.leg_lengths,
-                self.spec.leg_extension, absolute=self._sup.stepping.absolute,
+                self.spec.leg_extension, absolute=self._sup.stepping.absolute, dt=self.dt,
             )  # fmt: skip
         ft = self._foot_targets
 

@@ -362,7 +362,9 @@ class KinematicStepper:
                     self._rebase_pivot(side, human_foot.get(side))
                     pivot = self._turn_anchor(side, None)
                 else:
-                    pivot = self._pivot_anchor(side, human_foot.get(side))
+                    pivot = self._pivot_anchor(
+                        side, human_foot.get(side), _yaw_of(desired[side].rotation)
+                    )
                 if pivot is not None:
                     anchors[side] = pivot
                     pivoting.add(side)
@@ -523,13 +525,20 @@ class KinematicStepper:
         self._pivot[side] = [foot[0], 0.0, _xy(foot[1]), anchor_yaw, False]
         self._yaw_u[side] = anchor_yaw
 
-    def _pivot_anchor(self, side: str, foot: tuple[float, np.ndarray] | None) -> pin.SE3 | None:
+    def _pivot_anchor(
+        self, side: str, foot: tuple[float, np.ndarray] | None, yaw: float | None = None
+    ) -> pin.SE3 | None:
         """The ramped anchor of a stance foot that pivots, or ``None``.
 
-        The anchor's yaw follows the person's foot turn since the pivot's reference sample
-        (unwrapped: a dancer's 300 deg turn on one foot is followed the long way round) once
-        that turn exceeds ``pivot_yaw`` with a point of the foot within ``pivot_radius`` of
-        where it was (:func:`_least_motion`); its rate is ramped (:meth:`_turn_anchor`).
+        A pivot starts once the person's foot turn since the pivot's reference sample (unwrapped:
+        a dancer's 300 deg turn on one foot is followed the long way round) exceeds
+        ``pivot_yaw`` with a point of the foot within ``pivot_radius`` of where it was
+        (:func:`_least_motion`). The anchor's yaw then goes to ``yaw``, the sole yaw the
+        person's foot asks for (the swing target's: the foot's yaw within the waist's range),
+        else to its yaw at the start plus the person's turn; its rate is ramped
+        (:meth:`_turn_anchor`). Aiming at the foot's yaw rather than adding the turn also takes
+        out the offset a landing left (the dance spin's left sole was put down 69 deg from the
+        person's foot, and a pivot adding the turn kept the pelvis 40 deg behind).
         """
         start = self._pivot.get(side)
         if foot is None or not self.settings.pivot:
@@ -552,6 +561,9 @@ class KinematicStepper:
             if abs(turn) < st.pivot_yaw:
                 return self._turn_anchor(side, None)
             start[4] = True
+        if yaw is not None:
+            yaw_u = self._yaw_u.get(side, anchor_yaw0)
+            return self._turn_anchor(side, yaw_u + _wrap(yaw - yaw_u))
         return self._turn_anchor(side, anchor_yaw0 + turn)
 
     def _turn_anchor(self, side: str, goal: float | None) -> pin.SE3 | None:
