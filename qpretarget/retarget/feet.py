@@ -52,6 +52,9 @@ _OTHER = {"left": "right", "right": "left"}
 #: slip 0.8 -> 5.4 mm without the gate).
 ABSOLUTE_HEADING = (math.radians(30.0), math.radians(60.0))
 
+#: A swing foot higher than this (scaled) may cross the standing foot's line [m].
+CROSS_HEIGHT = 0.15
+
 #: The width of a step is measured across the feet's mean heading while their yaws differ by
 #: at most this [rad], else across the standing sole's.
 STRIDE_MEAN_YAW = 0.5
@@ -198,7 +201,12 @@ class FootTargets:
         return self._last_yaw.get(side), ratio >= 0.8
 
     def stride(
-        self, side: str, stance: pin.SE3, human: np.ndarray, heading: float | None = None
+        self,
+        side: str,
+        stance: pin.SE3,
+        human: np.ndarray,
+        heading: float | None = None,
+        cross: bool = False,
     ) -> np.ndarray:
         r"""Robot ankle-to-ankle vector of a step from the person's, ``human`` (swing - stance).
 
@@ -212,7 +220,8 @@ class FootTargets:
         c, s_ = math.cos(psi), math.sin(psi)
         fwd, lat = c * d[0] + s_ * d[1], -s_ * d[0] + c * d[1]
         sign = 1.0 if side == "left" else -1.0
-        lat = sign * max(0.7 * self.width_r, self.width_r + sign * lat - self.width_h)
+        lat = self.width_r + sign * lat - self.width_h
+        lat = sign * (lat if cross else max(0.7 * self.width_r, lat))
         return np.array([c * fwd - s_ * lat, s_ * fwd + c * lat, d[2]])
 
     def absolute_weight(self, heading: tuple[float, float] | None) -> float:
@@ -399,6 +408,12 @@ class FootTargets:
         for side, d in desired.items():
             p = d.translation.copy()
             other = _OTHER[side]
+            h = heights.get(side)
+            # A foot higher than CROSS_HEIGHT (scaled) may cross the standing foot's line: a
+            # leg raised in front of the body (the one-leg balance holds the foot 25 cm across
+            # the midline); near the floor the feet never cross. The self-collision constraint
+            # keeps the legs apart either way.
+            cross = h is not None and math.isfinite(h) and self.leg_scale * h > CROSS_HEIGHT
             a, b = kp.get(f"{side}_ankle"), self.human_anchor.get(other)
             if standing == (other,) and a is not None and b is not None:
                 # Width across the feet's mean heading when they point within
@@ -408,11 +423,10 @@ class FootTargets:
                 y1, y2 = yaw_of(soles[other].rotation[:, 0]), yaw_of(d.rotation[:, 0])
                 gap = math.atan2(math.sin(y2 - y1), math.cos(y2 - y1))
                 heading_s = y1 + 0.5 * gap if abs(gap) <= STRIDE_MEAN_YAW else y1
-                step = self.stride(side, soles[other], a - b, heading_s)
+                step = self.stride(side, soles[other], a - b, heading_s, cross)
                 ankle = feet.ankle_of(other, soles[other]) + step
                 if np.all(np.isfinite(ankle)):
                     p[:2] = (ankle + d.rotation @ feet.ankle_to_sole[side])[:2]
-            h = heights.get(side)
             w = w_abs
             if h is not None and math.isfinite(h):
                 # High up (a kick) the stride from the standing foot, near the floor (where the
@@ -424,7 +438,12 @@ class FootTargets:
             if w > 0.0 and a is not None and side in self.origin:
                 ankle = self.absolute_ankle(side, a)
                 hips = scaled.get("left_hip"), scaled.get("right_hip")
-                if standing == (other,) and hips[0] is not None and hips[1] is not None:
+                if (
+                    standing == (other,)
+                    and not cross
+                    and hips[0] is not None
+                    and hips[1] is not None
+                ):
                     ankle = self.uncrossed(side, ankle, soles[other], (hips[0], hips[1]))
                 if np.all(np.isfinite(ankle)):
                     q = (ankle + d.rotation @ feet.ankle_to_sole[side])[:2]
