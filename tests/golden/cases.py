@@ -7,12 +7,27 @@ shared clips retargeted with the shipped G1 whole-body config (a gesture clip, a
 the dance spin), the whole-body demo controller with support phases on a walk, 200 ticks of
 workload B of ../shared/bench, and scripted targets through the acceleration-level (CRAC) and
 hierarchy controllers, so every tick path is covered.
+
+Every golden run executes in a child process with a pinned floating-point environment
+(:func:`pinned_env`): the same numbers on every x86-64 machine. Without it the recording is a
+property of the CPU it was made on: OpenBLAS picks its kernels by CPU model (Haswell on an AVX2
+AMD EPYC, SkylakeX on an AVX-512 Xeon) and numpy dispatches its loops by CPU feature, and their
+different summation orders differ in the last bit, which the acceleration-level CRAC run
+amplifies to 2e-5 rad in 2 s (measured: the same commit, Haswell vs Sandybridge kernels on one
+machine, 2.0e-5; Haswell vs the Xeon's recording, 2.0e-5). Pinned: OpenBLAS's generic SSE3
+kernels (``OPENBLAS_CORETYPE=Prescott``, every x86-64 CPU runs them), numpy's baseline loops
+(``NPY_DISABLE_CPU_FEATURES`` = every dispatch target of the installed numpy), one thread.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import platform
+import subprocess
 import sys
-from collections.abc import Callable
+import tempfile
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -125,9 +140,61 @@ def run_case(name: str) -> np.ndarray:
         return CASES[name]()
 
 
+#: Key of the golden file that records the platform of the recording (not a case).
+PLATFORM_KEY = "_platform"
+
+
+def pinned_env() -> dict[str, str]:
+    """The environment of a golden run: the process's own, with the floating-point paths pinned.
+
+    ``OPENBLAS_CORETYPE=Prescott`` (x86-64 only: OpenBLAS's SSE3 kernels, which every x86-64
+    CPU has), ``NPY_DISABLE_CPU_FEATURES`` listing every SIMD dispatch target numpy was built
+    with (so it runs its baseline loops), and one BLAS/OpenMP thread.
+    """
+    from numpy._core import _multiarray_umath as umath
+
+    env = dict(os.environ)
+    env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    env["NPY_DISABLE_CPU_FEATURES"] = " ".join(getattr(umath, "__cpu_dispatch__", []))
+    if platform.machine().lower() in ("x86_64", "amd64"):
+        env["OPENBLAS_CORETYPE"] = "Prescott"
+    return env
+
+
+def platform_tag() -> str:
+    """What a recording depends on beyond the code: machine architecture and numpy version."""
+    return f"{platform.machine()} numpy {np.__version__} python {platform.python_version()}"
+
+
+def run_pinned(names: Sequence[str]) -> dict[str, np.ndarray]:
+    """Run the named cases in one child process with :func:`pinned_env`; return their q."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "runs.npz"
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--run", *names, "--out", str(out)]
+        proc = subprocess.run(cmd, env=pinned_env(), capture_output=True, text=True, check=False)
+        if proc.returncode != 0:
+            raise RuntimeError(
+                f"golden cases {list(names)} failed in the child process "
+                f"(exit {proc.returncode}):\n{proc.stderr[-4000:]}"
+            )
+        with np.load(out) as z:
+            return {k: z[k] for k in z.files}
+
+
+def _run_child(argv: list[str]) -> int:
+    """``--run NAME ... --out FILE``: the child side of :func:`run_pinned`."""
+    i, j = argv.index("--run"), argv.index("--out")
+    names, out = argv[i + 1 : j], Path(argv[j + 1])
+    np.savez(out, **{name: run_case(name) for name in names})
+    return 0
+
+
 def main(argv: list[str]) -> int:
     """``--write`` records every case; ``--write NAME ...`` re-records only those (the others are
-    kept as recorded), for a change that moves some cases on purpose."""
+    kept as recorded), for a change that moves some cases on purpose. Each is run by
+    :func:`run_pinned`."""
+    if "--run" in argv and "--out" in argv:
+        return _run_child(argv)
     if "--write" not in argv:
         print(__doc__)
         return 2
@@ -139,11 +206,15 @@ def main(argv: list[str]) -> int:
     data: dict[str, np.ndarray] = {}
     if GOLDEN.exists() and len(names) < len(CASES):
         with np.load(GOLDEN) as z:
-            data = {k: z[k] for k in z.files}
+            data = {k: z[k] for k in z.files if k != PLATFORM_KEY}
+    data.update(run_pinned(names))
     for name in names:
-        data[name] = run_case(name)
         print(f"{name}: {data[name].shape}")
-    np.savez_compressed(GOLDEN, **data)
+    data[PLATFORM_KEY] = np.array(json.dumps({"platform": platform_tag()}))
+    from qpretarget.fileio import atomic_path
+
+    with atomic_path(GOLDEN, suffix=".npz") as tmp:
+        np.savez_compressed(tmp, **data)
     print(f"wrote {GOLDEN}")
     return 0
 
