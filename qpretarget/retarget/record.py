@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from typing import Any, cast
 
 import numpy as np
@@ -43,9 +43,20 @@ class RunRecorder:
         return len(self.rows["t"])
 
     def add(
-        self, t: float, res: StepResult, phase: str, support: str, scaled: Mapping[str, np.ndarray]
+        self,
+        t: float,
+        res: StepResult,
+        phase: str,
+        support: str,
+        scaled: Mapping[str, np.ndarray],
+        rolled: Collection[str] = (),
     ) -> None:
-        """Record one tick."""
+        """Record one tick.
+
+        ``rolled``: contacts on with the sole rolled onto its toes (kinematic *tiptoe*): their
+        front edge is pinned, not the sole, so the ``contacts`` column records them as off
+        (the column is the flat soles in contact, as a one-foot toe-off, whose contact is off).
+        """
         r = self.rows
         ctrl = self.controller
         r["t"].append(t)
@@ -61,7 +72,7 @@ class RunRecorder:
         for name in res.relaxed:
             self.relaxed_by[name] = self.relaxed_by.get(name, 0) + 1
         if self.contacts is not None:
-            active = set(self.contacts.active_feet)
+            active = set(self.contacts.active_feet) - set(rolled)
             r["contacts"].append([n in active for n in self.contacts.names])
         for n in self.pos_tasks:
             task = cast(Any, ctrl.tasks[n])  # a task with a position (pos_tasks)

@@ -662,7 +662,10 @@ class Retargeter:
         # 5. One control tick.
         res = ctrl.step(targets, dt=self.dt)
         if self._record:
-            self._rec.add(t, res, phase, support_state, scaled)
+            rolled = [] if self.stepper is None else self.stepper.rolled
+            self._rec.add(
+                t, res, phase, support_state, scaled, [self._sup.feet[s].contact for s in rolled]
+            )
         else:
             # Not recording: the support log keeps only its last entry (the state in force).
             log = self.sequencer or self.stepper
@@ -747,8 +750,9 @@ class Retargeter:
                 if f"{side}_ankle" in kp and h and math.isfinite(h[0]):
                     heights[side] = max(heights[side], h[0])
         desired = ft.place(
-            desired, scaled, kp, soles, stepper.contacts, heights, stepper.ground, heading
-        )
+            desired, scaled, kp, soles, stepper.contacts, heights, stepper.ground, heading,
+            rolled=stepper.rolled,
+        )  # fmt: skip
         before = dict(stepper.states)
         # Heel off: the person's ankle rises over its ground more than the toe does (a foot
         # flat on a raised surface is not a toe-off), scaled.
@@ -761,6 +765,7 @@ class Retargeter:
         cmd = stepper.update(
             t, self.detector.feet, soles, desired, human_foot, flight=self.detector.flight,
             toe_rise=rise, moved={s: ft.moved(s, kp) for s in SIDES},
+            low={s: self.detector.height[s] < self.detector.thresholds.height_on for s in SIDES},
         )  # fmt: skip
         for side in SIDES:
             if before[side] == "swing" and cmd.states[side] != "swing":

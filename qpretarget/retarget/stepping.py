@@ -8,6 +8,12 @@ do what the person does with its feet: every foot is a small state machine,
 stance      6-D contact on, the sole pinned where it landed; it *pivots* in place (the anchor's
             yaw ramped towards the person's foot yaw) when the person's foot turns by more than
             ``pivot_yaw`` while staying within ``pivot_radius`` of where it landed
+toe_off     the person's heel rises while the other robot foot stands flat: contact off, the
+            sole turned about the front edge of its rectangle (:meth:`KinematicStepper.toe_pose`)
+tiptoe      the person's heels both rise (the rise before a jump, reaching up on the toes), or
+            one while the other foot is up (a hop's push-off): the 6-D contact is kept, its
+            anchor turned about the sole's front edge every tick (a moving anchor: the front
+            edge stays pinned, the ankle rises as the person's)
 swing       contact off; the sole follows the scaled human ankle (position) and the person's foot
             yaw, kept flat and at least ``clearance`` above the ground
 landing     the person's foot is down again: the sole goes down flat, at most ``land_speed``,
@@ -38,7 +44,10 @@ import pinocchio as pin
 from ..motion.phases import _OTHER, SIDES, _positive, min_jerk
 
 #: Foot states.
-FOOT_STATES = ("stance", "toe_off", "swing", "landing")
+FOOT_STATES = ("stance", "toe_off", "tiptoe", "swing", "landing")
+
+#: Foot states whose 6-D contact is on (a tiptoe contact's anchor rolls about the front edge).
+CONTACT_STATES = frozenset({"stance", "tiptoe"})
 
 
 #: A stance foot pivots only while the other foot's target is lower than this [m]: not under a
@@ -47,7 +56,7 @@ FOOT_STATES = ("stance", "toe_off", "swing", "landing")
 PIVOT_SWING_MAX = 0.25
 
 #: The switches of :class:`StepSettings` (every other setting is a positive number).
-BOOL_SETTINGS = frozenset({"pivot", "initial_stance", "toe_off", "absolute"})
+BOOL_SETTINGS = frozenset({"pivot", "initial_stance", "toe_off", "tiptoe", "absolute"})
 
 
 @dataclass(frozen=True)
@@ -80,6 +89,20 @@ class StepSettings:
         toe_pitch: Largest pitch of a sole in toe-off [rad].
         toe_time: Longest toe-off [s]: a heel held up longer (on the ball of the foot) is put
             down flat again, until the person's heel has been down.
+        tiptoe: Whether stance soles roll onto their toes when both of the person's heels rise
+            (the rise before a jump, a reach up on tiptoe), or one while the other foot is up
+            and not about to land (a hop's push-off): unlike a toe-off the 6-D contacts stay
+            on, each anchored to its sole rolled about the front edge
+            (:meth:`KinematicStepper.toe_pose`, the pitch that raises the ankle as much as the
+            person's, within ``toe_pitch``), a moving anchor whose step is fed forward
+            (:meth:`~qpretarget.constraints.contacts.Contacts.set_anchor`): the front edges stay
+            pinned, held as long as the person stands on the toes (no ``toe_time``). It ends in
+            swing when the person lifts the foot (flight releases both) or flat in stance once
+            the person's heel is down and the sole has rolled back.
+        tiptoe_rate: Largest pitch rate of a tiptoe anchor [rad/s].
+        tiptoe_accel: Largest change rate of a tiptoe anchor's pitch rate [rad/s^2]: the roll
+            starts and stops smoothly (a step to full rate in one tick would ask the ankles for
+            more than the joint acceleration limits, and the contact would give).
         restep: A stance foot whose person's foot moved this far since touch-down without a
             detected lift (both its ankle and toe, scaled: a shuffle under the detector's lift
             height, a slide) steps there [m]: lifted at least ``lift_time``, put down where
@@ -113,6 +136,9 @@ class StepSettings:
     toe_rise: float = 0.02
     toe_pitch: float = 0.6
     toe_time: float = 0.4
+    tiptoe: bool = True
+    tiptoe_rate: float = 10.0
+    tiptoe_accel: float = 200.0
     restep: float = 0.05
     absolute: bool = True
 
@@ -140,9 +166,10 @@ class StepCommand:
         switched: ``True`` when ``contacts`` changed at this tick.
         feet: side -> sole target (``pinocchio.SE3``): the anchor of a standing foot.
         anchors: side -> new contact anchor (landing flattened, pivots) to set this tick.
-        states: side -> foot state (``stance``/``swing``/``landing``).
-        pivoting: sides whose anchor pivots this tick (a moving anchor: its step is fed
-            forward, :meth:`~qpretarget.constraints.contacts.Contacts.set_anchor`).
+        states: side -> foot state (:data:`FOOT_STATES`).
+        pivoting: sides whose anchor moves this tick, pivoting or rolling on its toes (a
+            moving anchor: its step is fed forward,
+            :meth:`~qpretarget.constraints.contacts.Contacts.set_anchor`).
     """
 
     contacts: tuple[str, ...]
@@ -241,6 +268,10 @@ class KinematicStepper:
         self._toe_down: set[str] = set()
         self._toe_armed: set[str] = set()
         self._restep: set[str] = set()
+        #: side -> pitch of a tiptoe anchor about the sole's front edge [rad].
+        self._roll: dict[str, float] = {}
+        #: side -> pitch rate of a tiptoe anchor [rad/s] (ramped by ``tiptoe_accel``).
+        self._roll_rate: dict[str, float] = {}
         self._started = False
 
     def __repr__(self) -> str:
@@ -254,8 +285,13 @@ class KinematicStepper:
 
     @property
     def contacts(self) -> tuple[str, ...]:
-        """Sides in stance."""
-        return tuple(s for s in SIDES if self.states[s] == "stance")
+        """Sides whose contact is on (in stance, or on tiptoe)."""
+        return tuple(s for s in SIDES if self.states[s] in CONTACT_STATES)
+
+    @property
+    def rolled(self) -> tuple[str, ...]:
+        """Sides whose contact is on with the sole rolled onto its toes (tiptoe)."""
+        return tuple(s for s in SIDES if self.states[s] == "tiptoe")
 
     def reset(
         self,
@@ -271,6 +307,7 @@ class KinematicStepper:
         self._landing, self._target, self._pivot, self._lift = {}, {}, {}, {}
         self._omega, self._yaw_u = {}, {}
         self._toe_down, self._toe_armed, self._restep = set(), set(), set()
+        self._roll, self._roll_rate = {}, {}
         for side, foot in (human_foot or {}).items():
             if foot is not None:
                 yaw0 = _yaw_of(soles[side].rotation)
@@ -289,6 +326,7 @@ class KinematicStepper:
         flight: bool | None = None,
         toe_rise: Mapping[str, float] | None = None,
         moved: Mapping[str, float] | None = None,
+        low: Mapping[str, bool] | None = None,
     ) -> StepCommand:
         """Advance every foot by one tick.
 
@@ -306,6 +344,11 @@ class KinematicStepper:
                 (heel off the ground: toe-off; ``None``: no toe-offs).
             moved: side -> how far the person's foot moved since touch-down, scaled [m]
                 (re-steps beyond ``restep``; ``None``: none).
+            low: side -> the person's foot is under the detector's touch-down height
+                (``height_on``): a foot about to be put down. A heel rising while the other
+                foot is up rolls the sole onto its toes (tiptoe) only while that foot is not
+                low (a hop's push-off, not a walk's heel-off just before the other foot
+                lands, which is a toe-off once the other foot stands). ``None``: never low.
 
         Returns:
             The :class:`StepCommand` of this tick.
@@ -324,11 +367,29 @@ class KinematicStepper:
             other_state = self.states[_OTHER[side]]
             other_stands = other_state == "stance"
             rise = (toe_rise or {}).get(side, 0.0)
-            heel_up = st.toe_off and side in self.toes and rise > st.toe_rise
+            rolls = side in self.toes and rise > st.toe_rise
+            heel_up = st.toe_off and rolls
+            # Tiptoe: both heels rise (the other at least half way, its robot foot standing, on
+            # tiptoe or in toe-off: the rise before a jump), or the heel rises while the other
+            # foot is up and not about to be put down (a hop's push-off): the sole rolls onto
+            # its toes with its contact kept.
+            on_toes = (
+                st.tiptoe
+                and rolls
+                and _OTHER[side] in self.toes
+                and (toe_rise or {}).get(_OTHER[side], 0.0) > 0.5 * st.toe_rise
+                and other_state in ("stance", "tiptoe", "toe_off")
+            ) or (
+                st.tiptoe
+                and rolls
+                and other_state in ("swing", "landing")
+                and not (low or {}).get(_OTHER[side], False)
+            )
             if state == "stance":
                 settled = t - self._since[side] >= st.min_stance
                 restep = not up and (moved or {}).get(side, 0.0) > st.restep
-                if (up or restep) and (other_state in ("stance", "toe_off") or flight) and settled:
+                lift_ok = other_state in ("stance", "toe_off", "tiptoe") or flight
+                if (up or restep) and lift_ok and settled:
                     self._enter(t, side, "swing")
                     self._lift[side] = (t, soles[side].copy())
                     self._pivot.pop(side, None)
@@ -336,14 +397,21 @@ class KinematicStepper:
                         self._restep.add(side)
                 elif not heel_up and rise <= 0.5 * st.toe_rise:
                     self._toe_armed.add(side)
-                if (
-                    self.states[side] == "stance"
-                    and not up
-                    and heel_up
-                    and side in self._toe_armed
-                    and other_stands
-                    and settled
-                ):
+                armed = self.states[side] == "stance" and not up and settled
+                armed = armed and side in self._toe_armed
+                if armed and on_toes and side not in self._omega:
+                    # Both heels rise (before a jump, on tiptoe), or one while the other foot is
+                    # up: the sole rolls onto its toes with its contact kept, the anchor turned
+                    # about the front edge. Not while the anchor pivots (stopping its yaw rate
+                    # in one tick to roll it slid the dance spin's front edge 1.9 mm).
+                    self._enter(t, side, "tiptoe")
+                    self._toe_armed.discard(side)
+                    self._pivot.pop(side, None)
+                    self._roll[side] = 0.0
+                    self._roll_rate[side] = 0.0
+                    self._tiptoe_tick(side, rise, anchors, pivoting)
+                    continue
+                if armed and heel_up and other_stands:
                     # The person's heel rises (push-off): the sole rolls onto its toes.
                     self._enter(t, side, "toe_off")
                     self._toe_armed.discard(side)
@@ -370,10 +438,25 @@ class KinematicStepper:
                     pivoting.add(side)
             elif state == "toe_off":
                 other_up = not human_support.get(_OTHER[side], True)
-                if up and (other_stands or flight):
+                if up and (other_state in CONTACT_STATES or flight):
                     self._enter(t, side, "swing")
                     self._lift[side] = (t, soles[side].copy())
                     self._toe_down.discard(side)
+                    continue
+                if other_state == "tiptoe" and rolls and side not in self._toe_down and not up:
+                    # The other heel rose too: this sole's contact is engaged on its toes, at
+                    # the pitch it has (about the same front edge), and rolls on from there. (A
+                    # toe-off whose other foot lifts goes flat as before: rolled on with its
+                    # contact, the karate kata's two such stances changed its chaotic run, 16
+                    # -> 13 robot steps for 15, the smallest followed lift 0.49 -> 0.36.)
+                    self._enter(t, side, "tiptoe")
+                    self._unroll(side, soles[side])
+                    self._roll_rate[side] = 0.0
+                    self._tiptoe_tick(side, rise, anchors, pivoting)
+                    # Not a moving anchor this tick: the contact was just anchored where the
+                    # sole is, the drift correction takes it onto the rolled pose.
+                    anchors[side] = self._rolled(side, self._roll[side])
+                    pivoting.discard(side)
                     continue
                 if (
                     rise <= 0.5 * st.toe_rise
@@ -399,6 +482,21 @@ class KinematicStepper:
                         )
                         self._anchor[side] = anchor
                         anchors[side] = anchor
+            elif state == "tiptoe":
+                if up and (other_state in CONTACT_STATES or other_state == "toe_off" or flight):
+                    self._enter(t, side, "swing")
+                    self._lift[side] = (t, soles[side].copy())
+                    self._roll.pop(side, None)
+                    self._roll_rate.pop(side, None)
+                    continue
+                self._tiptoe_tick(side, rise, anchors, pivoting)
+                if self._roll[side] <= 0.0 and rise <= 0.5 * st.toe_rise:
+                    # Rolled back flat, the person's heel down: a flat stance again, on the
+                    # anchor it stood on (the front edge did not move).
+                    self._enter(t, side, "stance")
+                    self._roll.pop(side, None)
+                    self._roll_rate.pop(side, None)
+                    anchors[side] = self._anchor[side].copy()
             elif state == "swing":
                 if side in self._restep and not up and t - self._since[side] < st.lift_time:
                     pass  # a re-step is lifted lift_time before it goes down
@@ -449,6 +547,9 @@ class KinematicStepper:
                 target = self.toe_pose(side, 0.0 if side in self._toe_down else rise)
                 feet[side] = target
                 self._target[side] = target
+            elif state == "tiptoe":
+                self._target.pop(side, None)
+                feet[side] = self._rolled(side, self._roll[side])
             elif state == "landing":
                 # Down only once above the landing spot (a sole put down short of it would carry
                 # the lag of the swing into every later stance), at most `land_speed`.
@@ -476,28 +577,101 @@ class KinematicStepper:
         )
 
     def toe_pose(self, side: str, rise: float) -> pin.SE3:
-        r"""Sole pose of a toe-off: the stance anchor turned about the sole's front edge.
+        """Sole pose of a toe-off: the stance anchor turned about the sole's front edge.
+
+        The pitch is the one that raises the ankle by ``rise`` (:meth:`toe_angle`).
+        """
+        return self._rolled(side, self.toe_angle(side, rise))
+
+    def toe_angle(self, side: str, rise: float) -> float:
+        r"""Pitch about the sole's front edge that raises the ankle by ``rise`` [rad].
 
         With :math:`d` the distance from the ankle to the front edge along the sole and
         :math:`h` the ankle's height over the sole, turning by :math:`\theta` raises the ankle
         by :math:`d \sin\theta - h (1 - \cos\theta) = r \sin(\theta + \varphi) - h`
         (:math:`r = \sqrt{d^2 + h^2}`, :math:`\varphi = \operatorname{atan2}(h, d)`): the pitch
         that raises it by ``rise`` is :math:`\theta = \arcsin((\mathrm{rise} + h) / r) -
-        \varphi`, within ``toe_pitch``; the front edge stays where it stood.
+        \varphi`, within ``[0, toe_pitch]``.
         """
-        anchor = self._anchor[side]
         x_front, ankle = self.toes[side]
         d, h = x_front - float(ankle[0]), float(ankle[2])
         r = math.hypot(d, h)
         if rise <= 0.0 or r <= 0.0:
-            return anchor.copy()
+            return 0.0
         theta = math.asin(min(1.0, (rise + h) / r)) - math.atan2(h, d)
-        theta = max(0.0, min(self.settings.toe_pitch, theta))
+        return max(0.0, min(self.settings.toe_pitch, theta))
+
+    def _rolled(self, side: str, theta: float) -> pin.SE3:
+        r"""The stance anchor of ``side`` turned by the pitch ``theta`` about its front edge.
+
+        :math:`M = A\,(R_y(\theta),\ e - R_y(\theta) e)` with :math:`e = (x_{front}, 0, 0)` in
+        the sole frame: the points of the front edge stay where they stood.
+        """
+        anchor = self._anchor[side]
+        if theta <= 0.0:
+            return anchor.copy()
+        x_front = self.toes[side][0]
         c, s_ = math.cos(theta), math.sin(theta)
         Ry = np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
         edge = np.array([x_front, 0.0, 0.0])
-        local = pin.SE3(Ry, edge - Ry @ edge)
-        return anchor * local
+        return anchor * pin.SE3(Ry, edge - Ry @ edge)
+
+    def _unroll(self, side: str, sole: pin.SE3) -> None:
+        r"""Stance anchor and roll of ``side`` from a sole that rolled without its contact.
+
+        A toe-off's sole follows its target through the foot task only, and may have moved
+        from its stance anchor (5-10 mm on the karate kata): the pitch :math:`\theta` is the
+        sole's (:meth:`_pitch_of`), the anchor the sole turned back by :math:`\theta` about its
+        own front edge, flat on the ground, so that the rolled anchor is where the sole is.
+        """
+        theta = self._pitch_of(side, sole)
+        x_front = self.toes[side][0]
+        c, s_ = math.cos(theta), math.sin(theta)
+        Ry = np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
+        edge = np.array([x_front, 0.0, 0.0])
+        base = sole * pin.SE3(Ry, edge - Ry @ edge).inverse()
+        p = np.array([base.translation[0], base.translation[1], self.ground])
+        self._anchor[side] = _flat(_yaw_of(base.rotation), p)
+        self._roll[side] = theta
+
+    def _pitch_of(self, side: str, sole: pin.SE3) -> float:
+        r"""Pitch of ``sole`` relative to the stance anchor of ``side`` [rad].
+
+        Within ``[0, toe_pitch]``: :math:`\operatorname{atan2}(R_{02}, R_{22})` of
+        :math:`R = R_a^\top R_{sole}`.
+        """
+        R = self._anchor[side].rotation.T @ sole.rotation
+        return max(0.0, min(self.settings.toe_pitch, math.atan2(R[0, 2], R[2, 2])))
+
+    def _tiptoe_tick(
+        self, side: str, rise: float, anchors: dict[str, pin.SE3], pivoting: set[str]
+    ) -> None:
+        r"""Roll the tiptoe anchor of ``side`` one tick towards the person's heel rise.
+
+        The pitch goes to :meth:`toe_angle` of ``rise`` (0 once the rise is under half
+        ``toe_rise``: the heel is down); its rate :math:`\omega` moves by at most
+        ``tiptoe_accel`` :math:`dt` per tick towards :math:`\operatorname{sign}(r)
+        \min(|r| / dt, \omega_{max}, \sqrt{2 a |r|})` (:math:`r` the pitch still to turn,
+        :math:`\omega_{max}` = ``tiptoe_rate``: it slows down in time to stop at the goal), as a
+        pivot's yaw (:meth:`_turn_anchor`). The anchor is the stance anchor turned about the
+        front edge (:meth:`_rolled`), a moving anchor.
+        """
+        st = self.settings
+        goal = self.toe_angle(side, rise) if rise > 0.5 * st.toe_rise else 0.0
+        old = self._roll[side]
+        r = goal - old
+        mag = min(abs(r) / self.dt, st.tiptoe_rate, math.sqrt(2.0 * st.tiptoe_accel * abs(r)))
+        w = self._roll_rate.get(side, 0.0)
+        dw = st.tiptoe_accel * self.dt
+        w = max(w - dw, min(w + dw, math.copysign(mag, r)))
+        new = max(0.0, min(st.toe_pitch, old + w * self.dt))
+        if abs(goal - new) < 1e-9:
+            new = goal
+        self._roll_rate[side] = (new - old) / self.dt
+        self._roll[side] = new
+        if new != old:
+            anchors[side] = self._rolled(side, new)
+            pivoting.add(side)
 
     def landing_spot(self, side: str) -> pin.SE3 | None:
         """Sole pose a landing foot is going down to (``None`` unless ``side`` is landing)."""

@@ -146,12 +146,78 @@ def test_a_rising_heel_rolls_the_stance_sole_onto_its_toes_about_the_front_edge(
     rolled_for = 0.01 * states.count("toe_off")
     assert settings.toe_time <= rolled_for <= settings.toe_time + 0.03
     assert states[-1] == "stance" and np.allclose(soles["right"].rotation, np.eye(3))
-    # No toe-off while the other foot does not stand (the robot keeps a foot on the ground).
-    st2 = KinematicStepper(settings, dt=0.01, toes=toes)
+    # No toe-off (contact off) while the other foot does not stand (the robot keeps a foot on
+    # the ground; with `tiptoe` the sole rolls with its contact kept instead, next test).
+    st2 = KinematicStepper(StepSettings(tiptoe=False), dt=0.01, toes=toes)
     st2.update(0.0, both, soles, soles, {}, toe_rise={"left": 0.0, "right": 0.0})
     st2.update(0.1, {"left": False, "right": True}, soles, soles, {})  # left swings
     cmd = st2.update(0.2, {"left": False, "right": True}, soles, soles, {}, toe_rise=rise)
     assert cmd.states == {"left": "swing", "right": "stance"}
+
+
+def test_both_heels_rising_roll_both_soles_onto_their_toes_with_the_contacts_kept():
+    toes = {s: (0.12, np.array([0.0, 0.0, 0.04])) for s in ("left", "right")}
+    settings = StepSettings()
+    st = KinematicStepper(settings, dt=0.01, toes=toes)
+    soles = {"left": _flat(0, 0.1, 0), "right": _flat(0, -0.1, 0)}
+    both = {"left": True, "right": True}
+    flat = {"left": 0.0, "right": 0.0}
+    st.update(0.0, both, soles, soles, {}, toe_rise=flat)
+    # Both heels rise 4 cm (scaled): both soles roll, their contacts stay on, each anchor a
+    # moving anchor turned about the sole's front edge, the pitch ramped from 0, held as long as
+    # the person stands on the toes (0.5 s here, longer than a toe-off's toe_time).
+    up = {"left": 0.04, "right": 0.04}
+    pitches, edges = [], []
+    assert settings.toe_time < 0.5
+    for k in range(10, 60):
+        cmd = st.update(0.01 * k, both, soles, soles, {}, toe_rise=up)
+        assert cmd.states == {"left": "tiptoe", "right": "tiptoe"}
+        assert cmd.contacts == ("left", "right") and st.rolled == ("left", "right")
+        for side in ("left", "right"):
+            M = cmd.feet[side]
+            if side in cmd.anchors:
+                assert side in cmd.pivoting  # fed forward by the contact rows
+                assert np.allclose(cmd.anchors[side].homogeneous, M.homogeneous)
+            edge = np.array([0.12, 0.05, 0.0])
+            edges.append(M.act(edge) - soles[side].act(edge))
+        R = cmd.feet["left"].rotation
+        pitches.append(math.atan2(R[0, 2], R[2, 2]))
+    assert np.abs(edges).max() < 1e-12  # the front edges stay where they stood
+    rate = np.diff([0.0, *pitches]) / 0.01
+    assert np.all(np.abs(rate) <= settings.tiptoe_rate + 1e-9)
+    assert np.all(np.abs(np.diff([0.0, *rate])) <= settings.tiptoe_accel * 0.01 + 1e-6)
+    ankle = cmd.feet["left"].act(toes["left"][1])
+    assert ankle[2] - 0.04 == pytest.approx(0.04, abs=1e-9)  # the ankle rose as the person's
+    # Back flat in stance on the same anchors when the heels come down.
+    for k in range(60, 100):
+        cmd = st.update(0.01 * k, both, soles, soles, {}, toe_rise=flat)
+    assert cmd.states == {"left": "stance", "right": "stance"} and st.rolled == ()
+    assert np.allclose(cmd.feet["left"].homogeneous, soles["left"].homogeneous)
+    # A heel rising while the other foot is up and not about to land (a hop's push-off): the
+    # standing sole rolls with its contact kept; not while the other foot is low (a walk's
+    # heel-off before the other foot lands), which stays flat, then rolls off as a toe-off
+    # (contact off) once the other foot stands.
+    for low, state in ((False, "tiptoe"), (True, "stance")):
+        st2 = KinematicStepper(settings, dt=0.01, toes=toes)
+        st2.update(0.0, both, soles, soles, {}, toe_rise=flat)
+        one = {"left": False, "right": True}
+        st2.update(0.1, one, soles, soles, {}, toe_rise=flat)  # the left swings
+        cmd = st2.update(
+            0.2, one, soles, soles, {}, toe_rise={"left": 0.0, "right": 0.04},
+            low={"left": low, "right": False},
+        )  # fmt: skip
+        assert cmd.states == {"left": "swing", "right": state} and "right" in cmd.contacts
+    # Flight from tiptoe releases both.
+    cmd = st.update(1.0, both, soles, soles, {}, toe_rise=up)
+    cmd = st.update(1.01, both, soles, soles, {}, toe_rise=up)
+    assert st.rolled == ("left", "right")
+    cmd = st.update(1.02, {"left": False, "right": False}, soles, soles, {}, toe_rise=up)
+    assert cmd.contacts == () and cmd.states == {"left": "swing", "right": "swing"}
+    # tiptoe: false keeps the former behaviour (a toe-off needs the other foot standing flat).
+    st3 = KinematicStepper(StepSettings(tiptoe=False), dt=0.01, toes=toes)
+    st3.update(0.0, both, soles, soles, {}, toe_rise=flat)
+    cmd = st3.update(0.1, both, soles, soles, {}, toe_rise=up)
+    assert sorted(cmd.states.values()) == ["stance", "toe_off"] and len(cmd.contacts) == 1
 
 
 def test_a_foot_the_person_moves_without_a_detected_lift_steps_there():
@@ -241,6 +307,44 @@ def _run(clip: str, start: float | None = None, end: float | None = None):
     motion = load_motion(MOCAP / clip)
     traj = Retargeter(ctrl).retarget(motion, start=start, end=end)
     return traj, human_metrics(traj, ctrl.robot), ctrl
+
+
+def _tiptoe_edge_slip(traj, robot) -> tuple[int, float]:
+    """Tiptoe stances and the largest horizontal motion of their soles' front edge [m].
+
+    For every run of ``tiptoe`` ticks of a foot (``support_state``), from the tick before it (the
+    flat stance it rolled from) to the tick after it when that is a flat stance again: the
+    motion of the front corners of the sole rectangle from where they stood (the contact's
+    points while the sole is rolled; the run's ``contacts`` column records the flat soles only).
+    """
+    states = [s.split("/") for s in traj.extra["support_state"]]
+    data = robot.model.createData()
+    T, n, worst = len(states), 0, 0.0
+    for i, side in enumerate(("left", "right")):
+        (foot,) = [f for f in robot.feet if side in f.lower()]
+        fid = robot.frame_id(robot.feet[foot].frame)
+        _, x1, y0, y1 = robot.feet[foot].rectangle
+        corners = np.array([[x1, y0, 0.0], [x1, y1, 0.0]])
+        tip = np.array([s[i] == "tiptoe" for s in states])
+        k = 0
+        while k < T:
+            if not tip[k]:
+                k += 1
+                continue
+            j = k
+            while j < T and tip[j]:
+                j += 1
+            end = j + 1 if j < T and states[j][i] == "stance" else j
+            pts = []
+            for m in range(max(k - 1, 0), end):
+                pin.framesForwardKinematics(robot.model, data, traj.q[m])
+                M = data.oMf[fid]
+                pts.append(corners @ M.rotation.T + M.translation)
+            d = np.asarray(pts) - pts[0]
+            worst = max(worst, float(np.linalg.norm(d[..., :2], axis=-1).max()))
+            n += 1
+            k = j
+    return n, worst
 
 
 def _limit_overshoot(traj, robot) -> float:
@@ -369,7 +473,9 @@ def test_both_feet_leave_the_ground_when_the_person_jumps():
     # (12/12 with the former 20 self-collision pairs, 11/12 with `pairs: auto`), and for most
     # of the person's flight time (86 % measured: detection delay at take-off and landing).
     assert m["flight"]["human"] >= 10
-    assert m["flight"]["robot"] >= m["flight"]["human"]  # 12/12 measured
+    # 13/12 measured: one more robot "flight" (16.8-17.0 s) is a hop's push-off on tiptoe, the
+    # metric's foot height being the sole origin's, 1-3 cm up on a sole rolled onto its toes.
+    assert m["flight"]["robot"] >= m["flight"]["human"]
     # Share of the person's flight time the robot flies: 0.86 before, 0.72 since a foot held
     # slow under 5 cm for 0.2 s while the other is up counts as stood on (the metric's flight is
     # both feet over 3 cm: a ball-of-the-foot stance, or feet on a raised surface, count as
@@ -379,14 +485,34 @@ def test_both_feet_leave_the_ground_when_the_person_jumps():
     assert m["sole_below_ground_mm"] < 2.0
     assert _limit_overshoot(traj, ctrl.robot) <= 1e-9
     assert m["held_ticks"] == 0
+    # Push-offs on the toes (stepping `tiptoe`): the person rises on the ball of the standing
+    # foot before a hop, of both feet before a jump; the robot's soles roll about their front
+    # edges with the contacts kept. 14 such stances measured, their front edges moving at most
+    # 0.65 mm (issue 15's stance slip bound, 1 mm, at the contact's points).
+    n_tiptoe, edge_slip = _tiptoe_edge_slip(traj, ctrl.robot)
+    assert n_tiptoe >= 8
+    assert edge_slip < 1e-3
+    # Root height vs the person's: max 13.0 cm and RMS 3.6 cm measured (17.8 and 4.1 with flat
+    # soles at every push-off; issue 15 asks 5 cm: the rest is the take-off itself, the
+    # person's feet leaving the floor 30-60 ms before the detector says so). Bounds 15 and
+    # 3.9 cm: the chaotic clip's figures move by about 1.5 and 0.1-0.2 cm with any change.
+    assert m["pelvis_height_error_m"]["max"] <= 0.15
+    assert m["pelvis_height_error_m"]["rms"] <= 0.039
 
 
-def test_online_push_equals_offline_causal_with_contacts_switching():
+# Excerpts: a walk's first steps; a jump's two-foot push-off on the toes (tiptoe) into flight.
+@pytest.mark.parametrize(
+    "clip, start, end",
+    [("cmu_16_33_walk_stop.bvh", 0.0, 1.4), ("cgspeed_cmu_01_01_playground_jumps.bvh", 12.0, 13.2)],
+)
+def test_online_push_equals_offline_causal_with_contacts_switching(clip, start, end):
     ctrl = Controller.from_yaml(CONFIG)
-    motion = load_motion(MOCAP / "cmu_16_33_walk_stop.bvh").slice(0.0, 1.4)
+    motion = load_motion(MOCAP / clip).slice(start, end)
     rt = Retargeter(ctrl)
     offline = rt.retarget(motion, causal=True)
     assert not offline.contacts.all()  # a foot was lifted: contacts switched in the excerpt
+    if "jumps" in clip:
+        assert "tiptoe/tiptoe" in set(offline.extra["support_state"])
     rt.start(motion)
     commands = []
     for k in range(len(motion)):
