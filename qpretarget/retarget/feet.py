@@ -59,15 +59,18 @@ CROSS_HEIGHT = 0.15
 #: at most this [rad], else across the standing sole's.
 STRIDE_MEAN_YAW = 0.5
 
-#: A swing sole the leg cannot reach beside a standing sole rolled onto its toes (tiptoe) is
-#: first raised by at most this much [m], then pulled towards the hip
-#: (:meth:`FootTargets.reachable`): the rolled sole lifts the hips with the person's, whose
-#: legs are straight, and near the floor the swing leg then had no horizontal reach left (on
-#: the tiptoe clip the foot was pulled right under the hip, 18 cm sideways; ankle error 0.118
-#: -> 0.126 leg lengths with the roll, 0.108 with the raise). Not with flat soles: raising
-#: every unreachable swing target (tiptoe clip 0.074, jumps 0.090) moved the kicks', kata's
-#: and spin's chaotic runs past their bounds (smallest kick lift 0.71 -> 0.69 of the
-#: person's, smallest kata lift 0.49 -> 0.21, spin heading error 47 -> 52 deg).
+#: A swing sole the leg cannot reach beside a standing sole rolled onto its toes (tiptoe), or
+#: while the person is in flight (and ``lift_time`` after it, when the landing spot is taken),
+#: is first raised by at most this much [m], then pulled towards the hip
+#: (:meth:`FootTargets.reachable`): the rolled sole, or the flight's waist, lifts the hips with
+#: the person's, whose legs are straight, and near the floor the swing leg then had no
+#: horizontal reach left (on the tiptoe clip the foot was pulled right under the hip, 18 cm
+#: sideways; ankle error 0.118 -> 0.126 leg lengths with the roll, 0.108 with the raise beside
+#: it, 0.081 in flight too; a jump's landing 10 cm beside the person's foot: jumps 0.105 ->
+#: 0.096). Not always: raising every unreachable swing target (tiptoe clip 0.074, jumps 0.090)
+#: moved the kicks', kata's and spin's chaotic runs past their bounds (smallest kick lift 0.71
+#: -> 0.69 of the person's, smallest kata lift 0.49 -> 0.21, spin heading error 47 -> 52 deg),
+#: and so did raising whenever no robot foot stands (the kata's: 0.49 -> 0.39).
 REACH_RAISE = 0.03
 
 
@@ -307,7 +310,7 @@ class FootTargets:
         cannot reach is first raised by at most ``lift``, to the height
         :math:`a_z = h_z - \sqrt{(\rho L)^2 - \lVert a_{xy} - h_{xy} \rVert^2}` at which it
         reaches, then moved horizontally (:data:`REACH_RAISE`, beside a standing sole rolled
-        onto its toes).
+        onto its toes and in flight).
         """
         L = self.leg_lengths.get(side)
         if L is None or hip is None or not np.all(np.isfinite(hip)):
@@ -419,12 +422,13 @@ class FootTargets:
         ground: float,
         heading: tuple[float, float] | None = None,
         rolled: tuple[str, ...] = (),
+        flight: bool = False,
     ) -> dict[str, pin.SE3]:
         """Place the swing soles (see the module docstring).
 
         ``rolled``: standing sides whose sole is rolled onto its toes (tiptoe): the other
         sole's target may be raised by :data:`REACH_RAISE` to stay within the leg's reach
-        (:meth:`reachable`).
+        (:meth:`reachable`); so may both with ``flight`` (the person in flight, or just landed).
 
         With ``absolute`` the horizontal target is the scaled person's foot in the world
         (:meth:`absolute_ankle`, kept uncrossed), blended with the stride placement by
@@ -485,7 +489,7 @@ class FootTargets:
             h = heights.get(side)
             if h is not None and math.isfinite(h):
                 p[2] = ground + self.leg_scale * h
-            lift = REACH_RAISE if other in rolled else 0.0
+            lift = REACH_RAISE if other in rolled or flight else 0.0
             p = self.reachable(side, p, d.rotation, scaled.get(f"{side}_hip"), lift)
             desired[side] = self.pitched(side, pin.SE3(d.rotation, p), kp, ground)
         return desired

@@ -445,6 +445,8 @@ class Retargeter:
             else None
         )
         self._foot_targets: FootTargets | None = None
+        #: Last time the person was in flight [s].
+        self._flight_t = -math.inf
         self._feet_warned = False
         self._first_targets: dict[str, tuple[np.ndarray | None, np.ndarray | None]] = {}
         self._rooting: Rooting | None = None
@@ -740,7 +742,11 @@ class Retargeter:
             stepper.reset(t, soles, human_foot)
             ft.start(kp, soles, heading)
         heights = dict(self.detector.height)
+        # Swing targets the legs cannot reach are raised in flight and for lift_time after it
+        # (the landing spot is taken as the person's foot touches down): feet.REACH_RAISE.
+        lift = self._sup.stepping.lift_time
         if self.detector.flight:
+            self._flight_t = t
             # In flight the soles rise with the person's ankles, not with the lowest foot point:
             # a jumping person points the feet (toes 10-15 cm under the ankles), a flat robot
             # sole at the toes' height held its pelvis 15-17 cm under the person's at every
@@ -751,7 +757,7 @@ class Retargeter:
                     heights[side] = max(heights[side], h[0])
         desired = ft.place(
             desired, scaled, kp, soles, stepper.contacts, heights, stepper.ground, heading,
-            rolled=stepper.rolled,
+            rolled=stepper.rolled, flight=self.detector.flight or t - self._flight_t <= lift,
         )  # fmt: skip
         before = dict(stepper.states)
         # Heel off: the person's ankle rises over its ground more than the toe does (a foot
