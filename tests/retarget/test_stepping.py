@@ -502,6 +502,22 @@ def test_both_feet_leave_the_ground_when_the_person_jumps():
     assert m["pelvis_height_error_m"]["rms"] <= 0.039
 
 
+def test_rising_on_the_toes_to_reach_up_rolls_the_soles_with_their_contacts():
+    # A clip not tuned for: the person reaches up on tiptoe and steps about (cmu_14_07).
+    traj, m, ctrl = _run("cmu_14_07_reach_up_tiptoe.bvh")
+    n_tiptoe, edge_slip = _tiptoe_edge_slip(traj, ctrl.robot)
+    assert n_tiptoe >= 5  # 9 measured
+    assert edge_slip < 1e-3  # front edges pinned: 0.52 mm measured
+    # Ankle displacement error 0.081 leg lengths measured (0.118 with flat soles; 0.108 with
+    # the roll alone, whose raised hips pulled a swing foot 18 cm sideways). Bound 0.10
+    # (issue 15's): the figure moves by about 0.01 with any change.
+    assert m["ankle_displacement_error_legs"]["rms"] <= 0.10
+    assert m["pelvis_height_error_m"]["rms"] <= 0.05  # 4.5 cm measured (4.7 with flat soles)
+    assert m["stance_slip_mm"]["max"] < 1.0 and m["sole_below_ground_mm"] < 2.0
+    assert _limit_overshoot(traj, ctrl.robot) <= 1e-9
+    assert m["held_ticks"] == 0
+
+
 # Excerpts: a walk's first steps; a jump's two-foot push-off on the toes (tiptoe) into flight.
 @pytest.mark.parametrize(
     "clip, start, end",
