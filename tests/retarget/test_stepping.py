@@ -464,7 +464,7 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
 
 def test_both_feet_leave_the_ground_when_the_person_jumps():
     traj, m, ctrl = _run("cgspeed_cmu_01_01_playground_jumps.bvh")
-    # Ankle displacement error (issue 15 asks 0.10 leg lengths): 0.096 measured (0.26 with the
+    # Ankle displacement error (issue 15 asks 0.10 leg lengths): 0.095 measured (0.26 with the
     # stride from the standing foot, which carried every short landing into the next steps;
     # 0.112 with the absolute foot spots; 0.105 with the push-offs on the toes; 0.096 with swing
     # targets raised rather than pulled under the hip in flight and at landing, REACH_RAISE).
@@ -494,11 +494,12 @@ def test_both_feet_leave_the_ground_when_the_person_jumps():
     n_tiptoe, edge_slip = _tiptoe_edge_slip(traj, ctrl.robot)
     assert n_tiptoe >= 8
     assert edge_slip < 1e-3
-    # Root height vs the person's: max 13.0 cm and RMS 3.6 cm measured (17.8 and 4.1 with flat
+    # Root height vs the person's: max 11.5 cm and RMS 3.5 cm measured (17.8 and 4.1 with flat
     # soles at every push-off; issue 15 asks 5 cm: the rest is the take-off itself, the
-    # person's feet leaving the floor 30-60 ms before the detector says so). Bounds 15 and
-    # 3.9 cm: the chaotic clip's figures move by about 1.5 and 0.1-0.2 cm with any change.
-    assert m["pelvis_height_error_m"]["max"] <= 0.15
+    # person's feet leaving the floor 30-60 ms before the detector says so, and the flight's
+    # apex). Bounds 13 and 3.9 cm: the chaotic clip's figures move by about 1.5 and 0.1-0.2 cm
+    # with any change.
+    assert m["pelvis_height_error_m"]["max"] <= 0.13
     assert m["pelvis_height_error_m"]["rms"] <= 0.039
 
 
