@@ -220,6 +220,36 @@ def test_both_heels_rising_roll_both_soles_onto_their_toes_with_the_contacts_kep
     assert sorted(cmd.states.values()) == ["stance", "toe_off"] and len(cmd.contacts) == 1
 
 
+def test_an_unreachable_swing_target_is_raised_before_it_is_pulled_under_the_hip():
+    from types import SimpleNamespace
+
+    from qpretarget.retarget.feet import REACH_RAISE, FootTargets
+
+    # Leg 0.6 m, 92 % of it usable (rho L = 0.552 m), ankle 4 cm over the sole; the hip 0.6 m up:
+    # the ankle 10 cm to the side, 4 cm up, is out of reach.
+    feet = SimpleNamespace(ankle_to_sole={"left": np.array([0.0, 0.0, -0.04])})
+    ft = FootTargets(feet, None, 1.0, {"left": 0.6}, 0.92)  # type: ignore[arg-type]
+    hip, sole, R = np.array([0.0, 0.0, 0.6]), np.array([0.1, 0.0, 0.0]), np.eye(3)
+    rho_l = 0.92 * 0.6
+
+    def reach(out: np.ndarray) -> float:
+        return float(np.linalg.norm(out + np.array([0.0, 0.0, 0.04]) - hip))
+
+    # Without lift: pulled right under the hip (no horizontal reach left at that height).
+    out = ft.reachable("left", sole, R, hip)
+    assert np.allclose(out, [0.0, 0.0, 0.0], atol=1e-9)
+    # With lift: raised to the height a_z = h_z - sqrt((rho L)^2 - n^2) where the leg reaches
+    # the foot's horizontal offset, which is kept.
+    out = ft.reachable("left", sole, R, hip, REACH_RAISE)
+    dz = 0.6 - math.sqrt(rho_l**2 - 0.1**2) - 0.04
+    assert 0.0 < dz <= REACH_RAISE
+    assert np.allclose(out, [0.1, 0.0, dz], atol=1e-6) and reach(out) == pytest.approx(rho_l)
+    # A lift smaller than needed: raised by all of it, then pulled in to the reach left.
+    out = ft.reachable("left", sole, R, hip, 0.015)
+    assert out[2] == pytest.approx(0.015) and 0.05 < out[0] < 0.1
+    assert reach(out) == pytest.approx(rho_l)
+
+
 def test_a_foot_the_person_moves_without_a_detected_lift_steps_there():
     settings = StepSettings()
     st = KinematicStepper(settings, dt=0.01)
