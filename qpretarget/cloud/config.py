@@ -17,6 +17,7 @@ paper's value where it gives one, Wang 2017 V.B-C) and is checked with the YAML 
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -199,6 +200,18 @@ class EMConfig:
             that did not, the frame is fitted again from the last such frame's pose and from
             the constant-velocity prediction, and the fit with the lowest NLL (eq. 3) kept.
         reinit_window: frames of the running median of sigma.
+        reinit_yaw_starts: coarse search over the trunk's yaw in a re-initialisation (0: off):
+            this many extra starts on each side, the last good pose with its floating base
+            turned about the vertical by ``k * reinit_yaw_step`` (k = 1..n, both signs) and the
+            joints ``reinit_yaw_reset`` set to 0 (the torso's heading kept; with such joints
+            the untwisted pose turned by 0 is a start too). Each gets ``reinit_yaw_iterations``
+            EM iterations; the one with the lowest NLL (eq. 3) is fitted on and competes with
+            the other starts. Needs ``reinit_ratio`` > 0 (the trigger).
+        reinit_yaw_step: grid step of those starts [rad].
+        reinit_yaw_iterations: EM iterations of each yaw start before they are compared.
+        reinit_yaw_reset: trunk joints the yaw starts set to 0, turning the base so that the
+            last one's heading is kept (G1: ``[waist_yaw_joint]``: a trunk twisted to the
+            waist's limit is untwisted).
         branch_joints: triples of joint names ``[a, b, c]``, each a chain of three revolute
             joints with mutually orthogonal axes (a shoulder's pitch, roll, yaw): when a fit
             leaves one of them within ``BRANCH_MARGIN`` of a limit, the frame is fitted again
@@ -232,6 +245,10 @@ class EMConfig:
     damping: float = 1.0e-6
     reinit_ratio: float = 0.0
     reinit_window: int = 30
+    reinit_yaw_starts: int = 0
+    reinit_yaw_step: float = 0.785
+    reinit_yaw_iterations: int = 10
+    reinit_yaw_reset: list[str] = field(default_factory=list)
     branch_joints: list[list[str]] = field(default_factory=list)
 
 
@@ -323,6 +340,11 @@ def _section(cls: type, spec: Any, path: str) -> Any:
                 raise ConfigError(
                     f"must be a list of [a, b, c] joint-name triples, got {value!r}.",
                     path=f"{path}.{key}",
+                )
+        elif key == "reinit_yaw_reset":
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise ConfigError(
+                    f"must be a list of joint names, got {value!r}.", path=f"{path}.{key}"
                 )
         elif key == "centre_joints" and value is not None:
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
@@ -445,6 +467,13 @@ class CloudConfig:
             raise ConfigError(
                 f"must be > 0 [Hz] or null (every frame), got {cal.centre_rate!r}.",
                 path="calibration.centre_rate",
+            )
+        if em.reinit_yaw_starts and not 0 < em.reinit_yaw_step * em.reinit_yaw_starts <= math.pi:
+            raise ConfigError(
+                f"need 0 < reinit_yaw_starts * reinit_yaw_step <= pi (the starts turn the base "
+                f"at most half a turn each way), got {em.reinit_yaw_starts} * "
+                f"{em.reinit_yaw_step} rad.",
+                path="em.reinit_yaw_step",
             )
         if cal.centre_symmetric and cal.centre_axes != "limb":
             raise ConfigError(

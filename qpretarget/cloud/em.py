@@ -649,6 +649,18 @@ class CloudRetargeter:
         self._branch_joints: list[tuple[int, np.ndarray]] = []
         self._branch_data = self.robot.model.createData()
         self._branches = self._branch_triples(cfg.em.branch_joints)
+        self._yaw_data = self.model.createData()
+        names = cfg.em.reinit_yaw_reset
+        for n in names:
+            self.robot.joint_index(n, path="em.reinit_yaw_reset")  # a clear error if unknown
+        ids = [self.model.getJointId(n) for n in names]
+        self._yaw_reset = np.array([self.model.joints[j].idx_q for j in ids], dtype=int)
+        self._yaw_joint = max(ids, default=0)  # the deepest: its heading is kept
+        if cfg.em.reinit_yaw_starts and self.model.joints[1].nq != 7:
+            raise ConfigError(
+                "the yaw search turns the floating base: the template's root must be a free-flyer.",
+                path="em.reinit_yaw_starts",
+            )
         self._contact_feet: tuple[str, ...] = ()
         self.reset()
 
@@ -1730,19 +1742,24 @@ class CloudRetargeter:
         *,
         centres: bool,
         tag: str = "",
+        iterations: int | None = None,
+        refine: bool = True,
     ) -> tuple[np.ndarray, float, float]:
         """The EM stages of a frame from ``q``: linear, joint centres, refinement.
 
-        Returns the fit, its sigma^2 and the NLL (eq. 3) after the position stages.
+        ``iterations`` caps the linear stage (default ``em.max_iterations``); ``refine``: False
+        skips the refinement. Returns the fit, its sigma^2 and the NLL (eq. 3) after the
+        position stages.
         """
         em = self.config.em
+        n_linear = em.max_iterations if iterations is None else iterations
         visible = self._active(self.template.pose(q, jacobians=False))
         active = self._use_visible(visible)
         # One set of kd-tree pairs for the position stages of the frame (searched again where
         # stale, _Neighbours): the cloud and the active points are the same throughout.
         neighbours = _Neighbours(self)
         q, sigma2, _ = self._em_stage(
-            tag + "linear", S, Sn, q, sigma2, q_prev, active, em.max_iterations, log, neighbours
+            tag + "linear", S, Sn, q, sigma2, q_prev, active, n_linear, log, neighbours
         )
         for p in range(1, em.visibility_passes):
             # The visible template points depend on the pose: recompute them at the fit and go on
@@ -1769,7 +1786,7 @@ class CloudRetargeter:
             if self._centre_due(frame):
                 q, sigma2 = self._centre_stage(S, q, sigma2, q_prev, active, log, neighbours)
         nll = self.final_nll(S, q, sigma2, active, neighbours)
-        if em.refine_iterations and Sn is not None:
+        if refine and em.refine_iterations and Sn is not None:
             q, sigma2, _ = self._em_stage(
                 tag + "refine", S, Sn, q, sigma2, q_prev, active, em.refine_iterations, log
             )
@@ -1795,7 +1812,9 @@ class CloudRetargeter:
         and the constant-velocity prediction (a fast limb the auto-regression lags behind).
         Each runs the linear and refinement stages (no centre stage: the joint-centre estimate
         learns from tracked frames only), its temporal term towards its own start. The fits
-        are compared by the NLL of eq. 3 on the same cloud, each with its own sigma^2.
+        are compared by the NLL of eq. 3 on the same cloud, each with its own sigma^2. With
+        ``em.reinit_yaw_starts``, the coarse search over the trunk's yaw (:meth:`_yaw_search`)
+        competes too; when it wins, the pose history restarts from its fit.
         """
         em = self.config.em
         starts = []
@@ -1811,10 +1830,7 @@ class CloudRetargeter:
             )
         best = fit
         for tag, start in starts:
-            q0 = self._clip(start)
-            if self.stability_mode == "qp":
-                q0, _ = self._restore_balance(q0)
-            q_prev = q0.copy() if em.temporal_reference == "prediction" else self.history[-1]
+            q0, q_prev = self._reinit_start(start)
             trial_log: list[IterationLog] = []
             cand = self._stages(
                 S, Sn, q0, em.sigma2_init, q_prev, None, trial_log, centres=False, tag=tag
@@ -1822,7 +1838,110 @@ class CloudRetargeter:
             log.extend(trial_log)
             if cand[2] < best[2]:
                 best = cand
+        yaw = self._yaw_search(S, Sn, log)
+        if yaw is not None and yaw[2] < best[2]:
+            best = yaw
+            # The prediction must not extrapolate the jump to the turned pose: it goes on
+            # from the new pose alone (fit() appends it).
+            self.history.clear()
         return best
+
+    def _reinit_start(self, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A re-initialisation start within the limits and balanced, and its temporal reference."""
+        q0 = self._clip(start)
+        if self.stability_mode == "qp":
+            q0, _ = self._restore_balance(q0)
+        ref = self.history[-1] if self.history else q0
+        q_prev = q0.copy() if self.config.em.temporal_reference == "prediction" else ref
+        return q0, q_prev
+
+    def _heading(self, q: np.ndarray, joint: int) -> float:
+        """Heading [rad] of pinocchio joint ``joint``'s frame: the angle of its x axis about z."""
+        pin.forwardKinematics(self.model, self._yaw_data, q)
+        R = self._yaw_data.oMi[joint].rotation
+        return math.atan2(R[1, 0], R[0, 0])
+
+    def yaw_starts(self, q: np.ndarray) -> list[tuple[float, np.ndarray]]:
+        r"""Starts of the coarse search over the trunk's yaw around pose ``q``: (offset, pose).
+
+        With :math:`\psi_k = k\,\delta` for :math:`k = \pm 1, \dots, \pm n`
+        (``em.reinit_yaw_starts`` n, ``em.reinit_yaw_step`` :math:`\delta`), the start k is
+        ``q`` with the joints ``em.reinit_yaw_reset`` set to 0 (clipped to their limits) and
+        the floating base turned about the vertical through its origin,
+        :math:`R_0 \leftarrow R_z(\psi_k + \Delta) R_0`, where :math:`\Delta` turns the base
+        so that the deepest reset joint's frame keeps its heading (the torso stays where it
+        was; the pelvis comes under it); with reset joints, :math:`\psi_0 = 0` (the untwisted
+        pose) is a start too. The other joints (arms, legs) keep ``q``'s angles.
+        """
+        em = self.config.em
+        base = q.copy()
+        turn = 0.0
+        offsets = [k * em.reinit_yaw_step for k in range(1, em.reinit_yaw_starts + 1)]
+        offsets = [x for k in offsets for x in (k, -k)]
+        if self._yaw_reset.size:
+            h0 = self._heading(base, self._yaw_joint)
+            idx = self._yaw_reset
+            base[idx] = np.clip(0.0, self.robot.q_min[idx], self.robot.q_max[idx])
+            turn = h0 - self._heading(base, self._yaw_joint)
+            offsets.insert(0, 0.0)
+        out = []
+        M0 = pin.XYZQUATToSE3(base[:7])
+        for psi in offsets:
+            a = turn + psi
+            Rz = np.array(
+                [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0, 0, 1]]
+            )
+            qk = base.copy()
+            qk[:7] = pin.SE3ToXYZQUAT(pin.SE3(Rz @ M0.rotation, M0.translation))
+            out.append((psi, qk))
+        return out
+
+    def _yaw_search(
+        self, S: np.ndarray, Sn: np.ndarray | None, log: list[IterationLog]
+    ) -> tuple[np.ndarray, float, float] | None:
+        r"""Coarse global search over the trunk's yaw (issue 23 item 2; None when off).
+
+        Every start of :meth:`yaw_starts` around the last good pose gets
+        ``em.reinit_yaw_iterations`` iterations of the linear stage (temporal term towards its
+        own start), and the one with the lowest NLL (eq. 3,
+        :math:`E = -\sum_n \log(\frac{1-\mu}{M}\sum_m \mathcal N(s_n; v_m, \sigma^2 I)
+        + \frac{\mu}{N})`, each with its own :math:`\sigma^2`) is fitted on by the full linear
+        and refinement stages. A short fit suffices to rank the starts: the trunk and the arms
+        are most of the cloud, and a start half a turn from the person cannot lay them on it.
+        """
+        em = self.config.em
+        if em.reinit_yaw_starts < 1 or self._good is None:
+            return None
+        best: tuple[np.ndarray, float, float, np.ndarray, str] | None = None
+        for psi, start in self.yaw_starts(self._good):
+            q0, q_prev = self._reinit_start(start)
+            tag = f"reinit-yaw{math.degrees(psi):+.0f}-"
+            trial_log: list[IterationLog] = []
+            q, sigma2, nll = self._stages(
+                S,
+                Sn,
+                q0,
+                em.sigma2_init,
+                q_prev,
+                None,
+                trial_log,
+                centres=False,
+                tag=tag,
+                iterations=em.reinit_yaw_iterations,
+                refine=False,
+            )
+            log.extend(trial_log)
+            if best is None or nll < best[2]:
+                best = (q, sigma2, nll, q_prev, tag)
+        if best is None:
+            return None
+        q, sigma2, _, q_prev, tag = best
+        trial_log = []
+        fit = self._stages(
+            S, Sn, q, sigma2, q_prev, None, trial_log, centres=False, tag=f"{tag}full-"
+        )
+        log.extend(trial_log)
+        return fit
 
     def _branch_triples(self, spec: list[list[str]]) -> list[np.ndarray]:
         r"""Configuration indices (3,) of each ``em.branch_joints`` triple, checked.
