@@ -13,11 +13,17 @@ cloud normals' own). The k-nearest-neighbour searches use pykdtree when it is in
 
 With ``--clip`` the human model follows a mocap clip at 30 Hz instead (the issue's figure: CMU
 14_37 drink, 2,500 cloud points), fitted with the shipped ``configs/cloud_g1.yaml`` (calibration
-and joint-centre learning on); the calibration frame is not counted.
+and joint-centre learning on); the calibration frame is not counted. It also prints the arm
+direction error (``qpretarget.cloud.measures.arm_direction_errors``) and, with ``--bound``, its
+reachability bound (``reachable_bound_*``, ``qpretarget.cloud.measures.arm_direction_bound``:
+the arms nearest the person's within G1's joint limits, the trunk as fitted or free; computed
+after the timing, about 1-2 s a frame).
 
     python scripts/bench_cloud.py [--frames 60] [--json out.json]
     python scripts/bench_cloud.py --clip ../shared/data/mocap/cmu_14_37_drink_soda.bvh
     python scripts/bench_cloud.py --clip ../shared/data/mocap/cmu_14_37_drink_soda.bvh --stages
+    python scripts/bench_cloud.py --clip ../shared/data/mocap/cmu_14_07_reach_up_tiptoe.bvh \
+        --frames 90 --bound
 """
 
 from __future__ import annotations
@@ -46,6 +52,11 @@ def main() -> None:
     ap.add_argument("--profile", type=int, default=0, help="print the N costliest functions")
     ap.add_argument("--rate", type=float, default=30.0, help="clip frames per second (--clip)")
     ap.add_argument("--stages", action="store_true", help="CPU time per stage of the fit")
+    ap.add_argument(
+        "--bound",
+        action="store_true",
+        help="reachability bound of the arm-direction error (--clip; 1-2 s a frame)",
+    )
     args = ap.parse_args()
 
     import proxsuite
@@ -112,6 +123,7 @@ def main() -> None:
     if args.clip:  # the docs' arm-direction error (qpretarget.cloud.measures)
         from qpretarget.cloud.measures import (
             ARM_SEGMENTS,
+            arm_direction_bound,
             arm_direction_errors,
             longest_run_above,
         )
@@ -126,6 +138,15 @@ def main() -> None:
             "seconds_above_45deg_longest": longest_run_above(err, syn.sequence.t, 45.0),
             "frames_not_ok": int(sum(r.status != "ok" for r in results)),
         }
+        if args.bound:  # what no fit can go under: the arms nearest the person's within
+            for trunk in ("fit", "free"):  # G1's joint limits, the trunk as fitted / free
+                b = arm_direction_bound(g1, traj.q, poser, syn.q, trunk=trunk)
+                arms[f"reachable_bound_{trunk}_trunk_deg"] = {
+                    "worst": float(b.max()),
+                    "median": float(np.median(b)),
+                    "per_segment": np.round(b.max(axis=0), 2).tolist(),
+                    "frames_above_12": int((b.max(axis=1) > 12.0).sum()),
+                }
     estep_share = None
     if prof is not None:
         stats = pstats.Stats(prof)

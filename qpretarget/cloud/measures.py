@@ -9,6 +9,10 @@ what the robot is sent), and the same segment of the human model that was render
 .. math:: e = \arccos \frac{u_{robot}^\top u_{human}}{\|u_{robot}\| \|u_{human}\|}.
 
 A fit whose feet are tilted or twisted shows here as a leaning or turned robot.
+
+The *reachability bound* (:func:`arm_direction_bound`) is the same error for the robot
+configuration closest to the person's arm directions within the joint limits: what no fit can
+go under where the person's arm is outside the robot's reach.
 """
 
 from __future__ import annotations
@@ -87,4 +91,136 @@ def longest_run_above(errors: np.ndarray, t: np.ndarray, threshold: float) -> fl
     return best
 
 
-__all__ = ["ARM_SEGMENTS", "arm_direction_errors", "longest_run_above"]
+def _arm_joints(robot: RobotModel, side: str) -> list[int]:
+    """Pinocchio joint ids moving the ``side`` arm's segments relative to the torso."""
+    model = robot.model
+    wrist = model.frames[model.getFrameId(robot.keyframes[f"{side}_wrist"])].parentJoint
+    torso = model.frames[model.getFrameId(robot.keyframes["torso"])].parentJoint
+    above = set(model.supports[torso])
+    return [j for j in model.supports[wrist] if j not in above and model.joints[j].nv == 1]
+
+
+def arm_direction_bound(
+    robot: RobotModel,
+    q_robot: np.ndarray,
+    poser: HumanPoser,
+    q_human: np.ndarray,
+    *,
+    trunk: str = "fit",
+    starts: int = 4,
+    seed: int = 0,
+) -> np.ndarray:
+    r"""(T, 4) arm-direction errors [deg] of the robot pose nearest the person's arms.
+
+    For each frame, with :math:`h_s` the human model's unit segment directions and
+    :math:`u_s(x)` the robot's (upper arm, forearm of each side; as in
+    :func:`arm_direction_errors`), solves
+
+    .. math:: \min_{x_{min} \le x \le x_{max}} \sum_s \Big\| \frac{u_s(x)}{\|u_s(x)\|}
+        - h_s \Big\|^2, \qquad \Big\| \frac{u}{\|u\|} - h \Big\| = 2 \sin\frac{e_s}{2}
+
+    (the chord of the angle :math:`e_s`, increasing in it) over ``x``: each arm's joints from the
+    shoulder to the wrist (G1: 7 per arm) within their limits, one least-squares problem per arm
+    (bounded trust region, :func:`scipy.optimize.least_squares`), the trunk held at the run's
+    ``q_robot`` (``trunk="fit"``); with ``trunk="free"``, also the trunk's joints (G1: the
+    waist) and the base's orientation, all in one problem: the robot's torso may then turn
+    anywhere. Returns the angles :math:`e_s` at the solution. Local minima (a shoulder's two
+    branches) are met with ``starts`` starts: the run's angles, the reference posture and
+    uniform draws within the limits (``seed``); the best is kept. Where the bound is above a
+    threshold, that error is beyond the robot's joint limits (with ``trunk="free"``: whatever
+    its torso does), not the fit's.
+    """
+    from scipy.optimize import least_squares
+
+    if trunk not in ("fit", "free"):
+        raise ValueError(f"trunk must be 'fit' or 'free', got {trunk!r}")
+    model = robot.model
+    rng = np.random.default_rng(seed)
+    sides = ("left", "right")
+    arm = {s: [model.joints[j].idx_q for j in _arm_joints(robot, s)] for s in sides}
+    torso = model.frames[model.getFrameId(robot.keyframes["torso"])].parentJoint
+    trunk_q = [model.joints[j].idx_q for j in model.supports[torso] if model.joints[j].nv == 1]
+    groups = [(s,) for s in sides] if trunk == "fit" else [sides]
+    nb = 3 if trunk == "free" and model.joints[1].nq == 7 else 0  # the base's rotation vector
+    arms = _ArmDirections(robot)
+    out = np.empty((len(q_robot), 4))
+    for k, q in enumerate(np.asarray(q_robot, float)):
+        human = poser.model_keypoints(q_human[k])
+        for group in groups:
+            idx = [i for s in group for i in arm[s]] + (trunk_q if trunk == "free" else [])
+            target = np.concatenate([_unit_segments(human, s) for s in group])
+            lo = np.r_[np.full(nb, -np.pi), model.lowerPositionLimit[idx]]
+            hi = np.r_[np.full(nb, np.pi), model.upperPositionLimit[idx]]
+            x_starts = [np.r_[np.zeros(nb), q[idx]], np.r_[np.zeros(nb), robot.q_reference[idx]]]
+            x_starts += [rng.uniform(lo, hi) for _ in range(max(starts - 2, 0))]
+            best = None
+            for x0 in x_starts[: max(starts, 1)]:
+                sol = least_squares(
+                    arms.residual,
+                    np.clip(x0, lo, hi),
+                    bounds=(lo, hi),
+                    xtol=1e-10,
+                    args=(q, idx, nb, group, target),
+                )
+                if best is None or sol.cost < best.cost:
+                    best = sol
+            assert best is not None
+            u = arms.directions(arms.config(best.x, q, idx, nb), group)
+            c = np.einsum("ij,ij->i", u.reshape(-1, 3), target.reshape(-1, 3))
+            for i, s in enumerate(group):
+                col = 2 * sides.index(s)
+                out[k, col : col + 2] = np.degrees(np.arccos(np.clip(c[2 * i : 2 * i + 2], -1, 1)))
+    return out
+
+
+_SEGMENTS = (("shoulder", "elbow"), ("elbow", "wrist"))
+
+
+def _unit_segments(points: dict[str, np.ndarray], side: str) -> np.ndarray:
+    """(6,) unit directions of the upper arm and the forearm of ``side`` from key points."""
+    u = [points[f"{side}_{b}"] - points[f"{side}_{a}"] for a, b in _SEGMENTS]
+    return np.concatenate([v / np.linalg.norm(v) for v in u])
+
+
+class _ArmDirections:
+    """The robot's arm-segment directions as a function of some joints (and the base's turn)."""
+
+    def __init__(self, robot: RobotModel) -> None:
+        self.model = robot.model
+        self.data = self.model.createData()
+        self.frames = {
+            f"{s}_{n}": self.model.getFrameId(robot.keyframes[f"{s}_{n}"])
+            for s in ("left", "right")
+            for n in ("shoulder", "elbow", "wrist")
+        }
+
+    @staticmethod
+    def config(x: np.ndarray, q: np.ndarray, idx: list[int], nb: int) -> np.ndarray:
+        """``q`` with ``x[nb:]`` at ``idx``, the base turned by the rotation vector ``x[:nb]``."""
+        qq = q.copy()
+        qq[idx] = x[nb:]
+        if nb:
+            R0 = pin.XYZQUATToSE3(q[:7]).rotation
+            qq[3:7] = pin.SE3ToXYZQUAT(pin.SE3(pin.exp3(x[:3]) @ R0, q[:3]))[3:]
+        return qq
+
+    def directions(self, q: np.ndarray, group: tuple[str, ...]) -> np.ndarray:
+        """(6 len(group),) unit upper-arm and forearm directions of the sides in ``group``."""
+        pin.framesForwardKinematics(self.model, self.data, q)
+        points = {k: self.data.oMf[f].translation for k, f in self.frames.items()}
+        return np.concatenate([_unit_segments(points, s) for s in group])
+
+    def residual(
+        self,
+        x: np.ndarray,
+        q: np.ndarray,
+        idx: list[int],
+        nb: int,
+        group: tuple[str, ...],
+        target: np.ndarray,
+    ) -> np.ndarray:
+        """Unit directions minus the person's: the chords ``2 sin(e/2)`` in norm."""
+        return self.directions(self.config(x, q, idx, nb), group) - target
+
+
+__all__ = ["ARM_SEGMENTS", "arm_direction_bound", "arm_direction_errors", "longest_run_above"]
