@@ -1877,7 +1877,7 @@ class CloudRetargeter:
         base = q.copy()
         turn = 0.0
         offsets = [k * em.reinit_yaw_step for k in range(1, em.reinit_yaw_starts + 1)]
-        offsets = [x for k in offsets for x in (k, -k)]
+        offsets = [x for k in offsets for x in ((k, -k) if k < math.pi - 1e-9 else (k,))]
         if self._yaw_reset.size:
             h0 = self._heading(base, self._yaw_joint)
             idx = self._yaw_reset
