@@ -103,6 +103,24 @@ def test_retarget_command_on_a_walk_excerpt(tmp_path, capsys):
     assert np.allclose(np.diff(RobotTrajectory.load(out).t), 0.02)
 
 
+def test_retarget_command_drops_a_t_pose_first_frame_and_says_so(tmp_path, capsys):
+    # cgspeed's CMU conversions start with a T-pose frame (README caveat 2): calibrating on it
+    # and counting the jump from it as motion made the human 34 steps instead of 25.
+    out = tmp_path / "jumps.npz"
+    clip = MOCAP / "cgspeed_cmu_01_01_playground_jumps.bvh"
+    args = ["retarget", str(_config_file(tmp_path)), str(clip), "-o", str(out),
+            "--end", "0.5", "--quiet"]  # fmt: skip
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "note: frame 0 of cgspeed_cmu_01_01_playground_jumps.bvh dropped" in text
+    run = RobotTrajectory.load(out)
+    assert run.t[0] == pytest.approx(1 / 120)  # the motion's own clock, from frame 1
+    assert run.meta["motion_notes"] and "0.69 m" in run.meta["motion_notes"][0]
+    assert main(args + ["--keep-leading-cut"]) == 0
+    assert "dropped" not in capsys.readouterr().out
+    assert RobotTrajectory.load(out).t[0] == pytest.approx(0.0)
+
+
 def test_retarget_command_errors_are_one_line(tmp_path, capsys):
     config = str(_config_file(tmp_path))
     assert main(["retarget", config, str(tmp_path / "nope.bvh"), "-o", "x.npz"]) == 1

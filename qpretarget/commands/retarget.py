@@ -54,6 +54,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--length-scale", type=float, default=None, help="metres per file unit (default: auto)"
     )
     p.add_argument("--up-axis", choices=("y", "z"), default=None, help="up axis of the file")
+    p.add_argument(
+        "--keep-leading-cut",
+        action="store_true",
+        help="keep the frames before a cut at the clip's start (a reference T-pose in frame 0, "
+        "a dropout), which are dropped by default with a note",
+    )
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -70,7 +76,7 @@ def _load(args: argparse.Namespace):  # noqa: ANN202
     if args.asf is not None:
         options["asf"] = args.asf
     try:
-        return load_motion(path, **options)
+        return load_motion(path, keep_leading_cut=args.keep_leading_cut, **options)
     except (FileNotFoundError, ValueError, TypeError) as exc:
         if isinstance(exc, MotionError):
             raise
@@ -100,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet and sys.stderr.isatty(),
     )
     wall = time.perf_counter() - t0
+    traj.meta["motion_notes"] = list(motion.meta.get("notes", []))
     with atomic_path(output, suffix=".npz") as tmp:
         traj.save(tmp)
     out = output
@@ -110,6 +117,8 @@ def run(args: argparse.Namespace) -> int:
         f"{traj.meta['capture_rate']:g} Hz -> {traj.meta['control_rate']:g} Hz)"
     )
     print(format_summary(summary, title=title))
+    for note in traj.meta["motion_notes"]:
+        print(f"note: {note}")
     for note in traj.meta.get("skipped_tasks", []):
         print(f"note: task {note!r} has no key-point in this motion; it kept its reference target")
     for message in traj.meta.get("messages", []):

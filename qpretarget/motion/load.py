@@ -57,8 +57,12 @@ def find_asf(amc_path: str | Path) -> Path:
     )
 
 
-def load_motion(path: str | Path, **options: Any) -> HumanMotion:
+def load_motion(path: str | Path, *, keep_leading_cut: bool = False, **options: Any) -> HumanMotion:
     """Read a motion file with the reader its extension calls for.
+
+    Frames before a cut at the start of the clip (a reference T-pose in frame 0, a dropout:
+    :func:`~qpretarget.motion.human_motion.leading_cut`) are dropped, and
+    ``meta["notes"]`` says so, unless ``keep_leading_cut``.
 
     * ``.bvh`` -> :func:`~qpretarget.motion.bvh.read_bvh`
     * ``.amc`` -> :func:`~qpretarget.motion.asf_amc.read_asf_amc`, skeleton from ``asf=`` or
@@ -68,6 +72,7 @@ def load_motion(path: str | Path, **options: Any) -> HumanMotion:
 
     Args:
         path: The motion file.
+        keep_leading_cut: Keep the frames before a cut at the start (as the file has them).
         **options: Keyword arguments of the reader (``length_scale``, ``up_axis``, ``rate``,
             ``asf``, ``marker_map``).
 
@@ -90,6 +95,11 @@ def load_motion(path: str | Path, **options: Any) -> HumanMotion:
         )
     if not path.is_file():
         raise FileNotFoundError(f"motion file {path} does not exist")
+    motion = _read(path, suffix, options)
+    return motion if keep_leading_cut else motion.without_leading_cut()
+
+
+def _read(path: Path, suffix: str, options: dict[str, Any]) -> HumanMotion:
     if suffix == ".bvh":
         return read_bvh(path, **options)
     if suffix == ".c3d":

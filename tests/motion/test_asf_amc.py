@@ -40,7 +40,7 @@ def test_amc_matches_its_bvh_reencoding(mocap, load_clip, asf, amc, bvh, first_a
 def test_cgspeed_bvh_matches_amc_except_the_thorax_vector(load_clip):
     """README caveats 2-3: legs and spine agree; neck/arms shift by the 0.117 m thorax bone."""
     amc = load_clip("cmu_01_01.amc")
-    cgspeed = load_clip("cgspeed_cmu_01_01_playground_jumps.bvh")[1:]  # frame 0 is a T-pose
+    cgspeed = load_clip("cgspeed_cmu_01_01_playground_jumps.bvh")  # its T-pose frame 0 dropped
     for ours, theirs in [
         ("lfemur", "LeftUpLeg"),
         ("rtoes_end", "RightToeBase_end"),

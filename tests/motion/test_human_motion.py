@@ -141,3 +141,51 @@ def test_orientations_are_rotations(load_clip):
 def test_repr_names_source_and_size(load_clip):
     text = repr(load_clip("cmu_16_15_walk.bvh"))
     assert "cmu_16_15_walk.bvh" in text and "frames=469" in text and "rate=120 Hz" in text
+
+
+def _walker(frames: int = 240, rate: float = 120.0) -> np.ndarray:
+    """Three points moving smoothly (a 1 m/s walk with a 2 Hz arm swing): (T, 3, 3) [m]."""
+    t = np.arange(frames) / rate
+    base = np.stack([t, np.zeros_like(t), np.full_like(t, 1.0)], axis=1)
+    arm = base + np.stack([0.3 * np.sin(4 * np.pi * t), 0.2 + 0 * t, 0 * t], axis=1)
+    foot = base + np.stack([0 * t, -0.1 + 0 * t, -0.9 + 0.05 * np.sin(2 * np.pi * t)], axis=1)
+    return np.stack([base, arm, foot], axis=1)
+
+
+def test_leading_cut_finds_a_reference_pose_and_a_dropout():
+    from qpretarget.motion.human_motion import leading_cut
+
+    p = _walker()
+    assert leading_cut(p)[0] == 0  # continuous motion: nothing dropped
+    tpose = p.copy()
+    tpose[0, 1] += [0.0, 0.6, 0.5]  # frame 0: the arm held out (a T-pose)
+    n, jump, largest = leading_cut(tpose)
+    assert n == 1
+    assert jump == pytest.approx(np.hypot(0.6, 0.5), abs=0.02)  # plus one frame of motion
+    assert largest < 0.05  # a 1 m/s walk with a swinging arm: about 1-2 cm per frame
+    dropout = p.copy()
+    dropout[:2, 1] = dropout[:2, 0]  # frames 0-1: the arm snapped onto the base (CMU 16_15)
+    assert leading_cut(dropout)[0] == 2
+    # A fast motion from the first frame is not a cut: 3x its own largest later jump is the bar.
+    fast = p.copy()
+    fast[:, 1, 0] += 0.5 * np.sin(np.arange(len(p)) * 0.8)  # a 0.5 m, 15 Hz flail throughout
+    assert leading_cut(fast)[0] == 0
+    # Missing points (NaN) are ignored; a clip shorter than twice the search is left alone.
+    gappy = tpose.copy()
+    gappy[5:50, 2] = np.nan
+    assert leading_cut(gappy)[0] == 1
+    assert leading_cut(tpose[:15])[0] == 0
+
+
+def test_without_leading_cut_keeps_timestamps_and_says_what_it_dropped():
+    p = _walker()
+    p[0, 1] += [0.0, 0.6, 0.5]
+    t = np.arange(len(p)) / 120.0
+    m = HumanMotion(t=t, names=("base", "arm", "foot"), positions=p, parents=(-1, 0, 0),
+                    rate=120.0, source="/x/clip.bvh")  # fmt: skip
+    cut = m.without_leading_cut()
+    assert len(cut) == len(m) - 1 and cut.t[0] == t[1]
+    assert cut.meta["dropped_leading_frames"] == 1
+    (note,) = cut.meta["notes"]
+    assert "frame 0 of clip.bvh dropped" in note and "keep_leading_cut=True" in note
+    assert cut.without_leading_cut() is cut  # nothing left to drop
