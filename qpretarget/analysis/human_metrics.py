@@ -26,14 +26,17 @@ with :math:`w_h` the person's waist key-point, :math:`w_r` the robot's pelvis fr
 * *foot height*: robot, sole frame height above the soles' first-sample height; person, the
   lowest of its foot key-points (ankle, toe, heel) above that point type's lowest height in the
   clip (either foot), times :math:`s`;
+* *off the ground* (robot): the sole's lowest corner (of its rectangle) higher than 5 mm above
+  the soles' first-sample height: a sole rolled onto its toes stands on its front edge, its
+  frame 1-3 cm up;
 * *steps*: foot lifts, maximal intervals with a foot higher than 3 cm (gaps under 0.1 s merged),
   counted per foot, robot and person;
 * *swing-height ratio*: for each human lift higher than 5 cm, the robot foot's highest point
   within the lift (widened by 0.2 s each side) over the person's;
 * *lift agreement*: share of the samples with a human foot higher than 3 cm in which the robot's
-  same foot is off the ground (higher than 5 mm);
-* *flight*: intervals with both feet higher than 3 cm (person) or 5 mm (robot), and the share of
-  the person's flight time in which the robot is in flight too;
+  same foot is off the ground;
+* *flight*: intervals with both feet higher than 3 cm (person) or off the ground (robot), and
+  the share of the person's flight time in which the robot is in flight too;
 * *ankle displacement error*: each ankle's displacement from its first-sample position, robot
   minus scaled human, in robot leg lengths, RMS over samples and both ankles (stance width and
   the robot's different foot placement at the start drop out);
@@ -174,6 +177,13 @@ class _RobotSeries:
         self.pelvis_R = np.empty((T, 3, 3))
         self.ankle = {s: np.empty((T, 3)) for s in ankles}
         self.sole = {s: np.empty((T, 3)) for s in soles}
+        #: side -> height of the sole's lowest corner [m] (a sole rolled onto its toes stands
+        #: on its front edge: its origin is up, its lowest point is not).
+        self.sole_low = {s: np.empty(T) for s in soles}
+        corners = {}
+        for s in soles:
+            x0, x1, y0, y1 = robot.feet[feet[s][0]].rectangle
+            corners[s] = np.array([[x, y, 0.0] for x in (x0, x1) for y in (y0, y1)]).T
         for k in range(T):
             pin.framesForwardKinematics(model, data, q[k])
             M = data.oMf[pelvis]
@@ -182,7 +192,9 @@ class _RobotSeries:
             for s, fid in ankles.items():
                 self.ankle[s][k] = data.oMf[fid].translation
             for s, fid in soles.items():
-                self.sole[s][k] = data.oMf[fid].translation
+                Ms = data.oMf[fid]
+                self.sole[s][k] = Ms.translation
+                self.sole_low[s][k] = float(np.min(Ms.rotation[2] @ corners[s])) + Ms.translation[2]
         self.foot_columns = {
             s: traj.foot_names.index(v[0])
             for s, v in feet.items()
@@ -305,11 +317,13 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
 
     # Feet.
     h_r: dict[str, np.ndarray] = {}
+    low_r: dict[str, np.ndarray] = {}
     h_h: dict[str, np.ndarray] = {}
     if rs.sole:
         ground = float(np.mean([rs.sole[x][0, 2] for x in rs.sole]))
         h_r = {x: rs.sole[x][:, 2] - ground for x in rs.sole}
-        out["sole_below_ground_mm"] = max(0.0, -min(float(v.min()) for v in h_r.values())) * 1e3
+        low_r = {x: rs.sole_low[x] - ground for x in rs.sole}
+        out["sole_below_ground_mm"] = max(0.0, -min(float(v.min()) for v in low_r.values())) * 1e3
     types = [p for p in ("ankle", "toe", "heel") if all(f"{x}_{p}" in kp for x in SIDES)]
     if types and rs.sole:
         gnd = {p: min(np.nanmin(kp[f"{x}_{p}"][:, 2]) for x in SIDES) for p in types}
@@ -317,7 +331,7 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
             hs = np.stack([kp[f"{x}_{p}"][:, 2] - gnd[p] for p in types], axis=1)
             h_h[x] = s * np.nanmin(hs, axis=1)
     if h_r and h_h:
-        out.update(_feet_metrics(t, h_r, h_h, traj, rs))
+        out.update(_feet_metrics(t, h_r, low_r, h_h, traj, rs))
     # Ankle displacement error.
     errs = []
     for x in SIDES:
@@ -344,6 +358,7 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
 def _feet_metrics(
     t: np.ndarray,
     h_r: Mapping[str, np.ndarray],
+    low_r: Mapping[str, np.ndarray],
     h_h: Mapping[str, np.ndarray],
     traj: RobotTrajectory,
     rs: _RobotSeries,
@@ -367,7 +382,7 @@ def _feet_metrics(
             ratios.append(float(np.max(h_r[x][lo:hi])) / peak)
         lifted = h_h[x] > LIFT_HEIGHT
         agree_den += int(lifted.sum())
-        agree_num += int(np.sum(lifted & (h_r[x] > OFF_GROUND)))
+        agree_num += int(np.sum(lifted & (low_r[x] > OFF_GROUND)))
     out["steps"] = steps
     out["steps_total"] = {
         "robot": sum(v["robot"] for v in steps.values()),
@@ -380,7 +395,7 @@ def _feet_metrics(
     }
     out["lift_agreement"] = agree_num / agree_den if agree_den else None
     fly_h = np.logical_and.reduce([h_h[x] > LIFT_HEIGHT for x in SIDES if x in h_h])
-    fly_r = np.logical_and.reduce([h_r[x] > OFF_GROUND for x in SIDES if x in h_r])
+    fly_r = np.logical_and.reduce([low_r[x] > OFF_GROUND for x in SIDES if x in low_r])
     out["flight"] = {
         "human": len(intervals(fly_h, t, merge=MERGE_GAP)),
         "robot": len(intervals(fly_r, t, merge=MERGE_GAP)),
@@ -396,7 +411,7 @@ def _feet_metrics(
         if contacts is not None and contacts.size and col is not None:
             on = contacts[:, col]
         else:
-            on = h_r[x] < OFF_GROUND
+            on = low_r[x] < OFF_GROUND
         worst = settle = 0.0
         for i, j in intervals(on, t):
             stances += 1

@@ -19,6 +19,7 @@ constraint on it would only make the QP infeasible).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -295,6 +296,21 @@ class SoleGround(Constraint):
     the contact stands on) rather than the :class:`Ground` damper on the foot link's hull: no
     distance query, no arming logic, and only the lifted feet have rows (feet in contact are held
     by the contact equality).
+
+    The first-order row is not viable under acceleration limits: a sole coming down at 3 m/s
+    that meets it 5 cm over the floor must stop within a tick or two, the joint acceleration
+    limits (hard, more important) forbid it, and the row gives: a kinematic landing put a
+    corner 10.8 mm into the floor on the playground jumps. With ``brake_accel`` :math:`a_b`
+    the descent is also bounded by the speed from which the corner can still stop at the
+    floor decelerating at :math:`a_b` (the braking bound of the joint limits, docs/reliability.md,
+    applied to a height):
+
+    .. math::
+        -\dot z_c \le \sqrt{2\, a_b\, (z_c - h)},
+
+    active below :math:`h + d_i` (so :math:`d_i` should hold the braking distance from the
+    fastest descent: :math:`v^2 / 2 a_b`).
+
     Soft, as ``ground`` (importance 75).
 
     Args:
@@ -303,6 +319,8 @@ class SoleGround(Constraint):
         d_i: rows only for corners lower than :math:`h + d_i` [m].
         gain_per_tick: fraction of the height a corner may lose per tick near the floor, (0, 1].
         recovery_speed: largest upward speed asked of a corner under the floor [m/s].
+        brake_accel: deceleration :math:`a_b` a descending corner is kept able to stop with
+            [m/s^2]; ``None``: first-order rows only.
         name: constraint name.
 
     Raises:
@@ -319,9 +337,20 @@ class SoleGround(Constraint):
         d_i: float = 0.05,
         gain_per_tick: float = 1.0,
         recovery_speed: float = 0.5,
+        brake_accel: float | None = None,
         name: str | None = None,
     ) -> None:
         super().__init__(name)
+        if brake_accel is not None and (
+            isinstance(brake_accel, bool)
+            or not isinstance(brake_accel, (int, float))
+            or not brake_accel > 0
+            or not np.isfinite(brake_accel)
+        ):
+            raise ConfigError(
+                f"brake_accel must be a positive number [m/s^2] or null, got {brake_accel!r}."
+            )
+        self.brake_accel = None if brake_accel is None else float(brake_accel)
         for key, value in (("height", height), ("d_i", d_i), ("gain_per_tick", gain_per_tick),
                            ("recovery_speed", recovery_speed)):  # fmt: skip
             if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -407,7 +436,10 @@ class SoleGround(Constraint):
                 J = state.frame_jacobian(fid)
                 for k in near:
                     C[row + k] = -(J[2] + r[k, 1] * J[3] - r[k, 0] * J[4])
-                    hi[row + k] = max(rate * z[k], -self.recovery_speed)
+                    bound = rate * z[k]
+                    if self.brake_accel is not None and z[k] > 0.0:
+                        bound = min(bound, math.sqrt(2.0 * self.brake_accel * z[k]))
+                    hi[row + k] = max(bound, -self.recovery_speed)
             row += n
         return ConstraintBlock(self.name, C, self._l, hi)
 
@@ -416,6 +448,7 @@ class SoleGround(Constraint):
         return [
             f"soles of lifted feet above z = {self.height} m: {self.n_rows} corner rows, "
             f"d_i={self.d_i} m, gain_per_tick={self.gain_per_tick}"
+            + ("" if self.brake_accel is None else f", brake_accel={self.brake_accel} m/s^2")
         ]
 
 

@@ -52,3 +52,35 @@ def test_bad_values_are_refused():
         SoleGround(gain_per_tick=2.0)
     with pytest.raises(ConfigError, match="feet must be a list"):
         SoleGround(feet="left_foot")
+
+
+def test_brake_accel_keeps_a_descending_corner_able_to_stop_at_the_floor():
+    robot = load_robot("g1")
+    state = RobotState(robot)
+    dt = 0.01
+    for height, expected in ((0.04, 0.04 / dt), (0.002, 0.002 / dt)):
+        q = robot.q_reference.copy()
+        q[2] += height  # both soles `height` above the floor, neither in contact
+        state.update(q)
+        plain, braked = SoleGround(), SoleGround(brake_accel=30.0, d_i=0.15)
+        for sg in (plain, braked):
+            sg.bind(robot)
+        u_plain = plain.compute_rows(state, dt).u
+        u_braked = braked.compute_rows(state, dt).u
+        # First order alone: a corner may come down z/dt (4 m/s from 4 cm in one tick).
+        assert np.allclose(u_plain, expected, atol=1e-6)
+        # Braked: at most sqrt(2 a z), the speed it can still stop from at 30 m/s^2 (1.55 m/s
+        # at 4 cm); near the floor the first-order bound is the smaller (0.2 m/s at 2 mm).
+        assert np.allclose(u_braked, min(expected, np.sqrt(2 * 30.0 * height)), atol=1e-6)
+    # The braking bound reaches up to d_i: 10 cm up, rows only with the wider band.
+    q = robot.q_reference.copy()
+    q[2] += 0.10
+    state.update(q)
+    assert np.all(np.isinf(plain.compute_rows(state, dt).u))
+    assert np.allclose(braked.compute_rows(state, dt).u, np.sqrt(2 * 30.0 * 0.10), atol=1e-6)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), "fast", True])
+def test_bad_brake_accel_is_refused(bad):
+    with pytest.raises(ConfigError, match="brake_accel"):
+        SoleGround(brake_accel=bad)
