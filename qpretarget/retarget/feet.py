@@ -176,6 +176,27 @@ class FootTargets:
         if toe is not None and np.all(np.isfinite(toe)):
             self.human_toe[side] = np.array(toe, float)
 
+    def lifted(self, side: str, sole: pin.SE3) -> None:
+        r"""A sole lifts into flight: its yaw target turns from where the sole is.
+
+        The swing-sole yaw target :math:`\Delta\psi` (the change since calibration, turning at
+        most :data:`FOOT_YAW_RATE`) keeps following the person's foot while the sole stands;
+        a stance sole the person turned the body over (a dancer's swivel the pivot did not
+        follow: the dance spin's left sole 100 deg from the person's foot when it lifted at
+        6.58 s) is far from it, and the lift-off blend turned it there within ``lift_time``.
+        In flight nothing holds the body, and the whole robot turned with the sole (the base at
+        34 rad/s, the pelvis from 33 deg behind the person's to 20 deg past it within 0.06 s,
+        tilted 15 deg). From the lift-off on, :math:`\Delta\psi`
+        starts at the sole's own yaw change :math:`\psi_{sole} - \psi_{ref}` (unwrapped near
+        the last target) and turns towards the person's foot at most :data:`FOOT_YAW_RATE`.
+        """
+        ref = self.feet.sole_ref[side].rotation
+        dpsi = yaw_of(sole.rotation[:, 0]) - yaw_of(ref[:, 0])
+        last = self._yaw_target.get(side)
+        if last is not None:
+            dpsi = last + math.atan2(math.sin(dpsi - last), math.cos(dpsi - last))
+        self._yaw_target[side] = dpsi
+
     def moved(self, side: str, kp: Mapping[str, np.ndarray]) -> float:
         """How far the person's foot moved since it touched down, scaled [m].
 

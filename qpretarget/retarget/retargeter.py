@@ -776,6 +776,10 @@ class Retargeter:
         for side in SIDES:
             if before[side] == "swing" and cmd.states[side] != "swing":
                 ft.touched_down(side, kp)
+            elif before[side] != "swing" and cmd.states[side] == "swing" and self.detector.flight:
+                # Lifted into the person's flight: nothing holds the body, and a sole target
+                # turning fast turns the whole robot (FootTargets.lifted).
+                ft.lifted(side, soles[side])
         if cmd.switched:
             ctrl.set_contacts([self._sup.feet[s].contact for s in cmd.contacts])
         self._con.clear_anchor_steps()

@@ -250,6 +250,51 @@ def test_an_unreachable_swing_target_is_raised_before_it_is_pulled_under_the_hip
     assert reach(out) == pytest.approx(rho_l)
 
 
+def test_a_sole_lifted_into_flight_turns_its_yaw_target_from_where_it_is():
+    from types import SimpleNamespace
+
+    from qpretarget.retarget.feet import FOOT_YAW_RATE, FootTargets
+
+    # The left foot (the right has no key-points), reference sole yaw 0, the person's foot 30 deg from its calibration yaw (toe
+    # 0.2 m ahead of the ankle, turned), the waist turned as much (within FOOT_YAW_RANGE).
+    feet = SimpleNamespace(
+        sole_ref={"left": pin.SE3.Identity()},
+        swing_sole=lambda *a: pin.SE3.Identity(),
+    )
+    cal = SimpleNamespace(human_foot_yaw={"left": 0.0})
+    dt = 0.01
+    ft = FootTargets(feet, cal, 1.0, {}, 0.92, dt=dt)  # type: ignore[arg-type]
+    ft.toe_length["left"] = 0.2
+    psi = math.radians(30.0)
+    kp = {
+        "left_ankle": np.zeros(3),
+        "left_toe": np.array([0.2 * math.cos(psi), 0.2 * math.sin(psi), 0.0]),
+    }
+
+    def target_yaw() -> float:
+        soles = {"left": pin.SE3.Identity(), "right": pin.SE3.Identity()}
+        desired, _ = ft.orient({}, kp, soles, lambda: psi)
+        R = desired["left"].rotation
+        return math.atan2(R[1, 0], R[0, 0])
+
+    assert target_yaw() == pytest.approx(psi, abs=1e-9)  # the person's foot yaw
+    # The sole stood 140 deg away (a swivel the pivot did not follow) and lifts into flight:
+    # the target starts at the sole's yaw and turns towards the person's foot by at most
+    # FOOT_YAW_RATE dt per tick (before, the lift-off blend turned it 110 deg in lift_time,
+    # 0.1 s, and the whole robot in flight with it), the short way round.
+    sole_yaw = math.radians(170.0)
+    ft.lifted("left", _flat(0.0, 0.0, 0.0, sole_yaw))
+    lim = FOOT_YAW_RATE * dt
+    yaws = [target_yaw() for _ in range(40)]
+    assert yaws[0] == pytest.approx(sole_yaw - lim, abs=1e-9)
+    steps = np.diff(np.unwrap([sole_yaw, *yaws]))
+    assert np.all(steps <= 1e-12) and np.all(steps >= -lim - 1e-12)
+    assert yaws[-1] == pytest.approx(psi, abs=1e-9)  # 140 deg at 6.9 deg per tick: 21 ticks
+    # Unwrapped near the last target: a sole at -190 deg is the same as one at 170 deg.
+    ft.lifted("left", _flat(0.0, 0.0, 0.0, math.radians(-190.0)))
+    assert target_yaw() == pytest.approx(sole_yaw - lim, abs=1e-9)
+
+
 def test_a_foot_the_person_moves_without_a_detected_lift_steps_there():
     settings = StepSettings()
     st = KinematicStepper(settings, dt=0.01)
@@ -476,6 +521,10 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
     assert m["pelvis_height_error_m"]["max"] <= (0.20 if "spin" in clip else 0.15)
     if "spin" in clip:
         assert m["heading_error_deg"]["max"] <= 50.0
+        # Pelvis tilt within issue 15's 15 deg of the person's: 14.2 measured (15.3 before a
+        # sole lifted into flight turned its yaw target from where it stood: the whole robot
+        # turned 35 deg past the person's at 6.6 s, FootTargets.lifted).
+        assert m["pelvis_tilt_error_deg"]["max"] <= 15.0
     else:
         # The kata's steps: 16 for the person's 15 (8 before a foot the person moves without a
         # detected lift re-steps, 12 with toe-offs alone, 13-14 before the stance feet pivoted).
@@ -505,8 +554,9 @@ def test_both_feet_leave_the_ground_when_the_person_jumps():
     # (12/12 with the former 20 self-collision pairs, 11/12 with `pairs: auto`), and for most
     # of the person's flight time (86 % measured: detection delay at take-off and landing).
     assert m["flight"]["human"] >= 10
-    # 13/12 measured: one more robot "flight" (16.8-17.0 s) is a hop's push-off on tiptoe, the
-    # metric's foot height being the sole origin's, 1-3 cm up on a sole rolled onto its toes.
+    # 10/10 measured (the clip's T-pose frame 0 dropped: 12/12 with it). A hop's push-off on
+    # tiptoe is not flight: the robot's feet are off the ground when their soles' lowest
+    # corners are (13/12 while the metric took the sole origin, 1-3 cm up on a rolled sole).
     assert m["flight"]["robot"] >= m["flight"]["human"]
     # Share of the person's flight time the robot flies: 0.86 before, 0.72 since a foot held
     # slow under 5 cm for 0.2 s while the other is up counts as stood on (the metric's flight is
@@ -524,12 +574,13 @@ def test_both_feet_leave_the_ground_when_the_person_jumps():
     n_tiptoe, edge_slip = _tiptoe_edge_slip(traj, ctrl.robot)
     assert n_tiptoe >= 8
     assert edge_slip < 1e-3
-    # Root height vs the person's: max 11.5 cm and RMS 3.5 cm measured (17.8 and 4.1 with flat
-    # soles at every push-off; issue 15 asks 5 cm: the rest is the take-off itself, the
-    # person's feet leaving the floor 30-60 ms before the detector says so, and the flight's
-    # apex). Bounds 13 and 3.9 cm: the chaotic clip's figures move by about 1.5 and 0.1-0.2 cm
-    # with any change.
-    assert m["pelvis_height_error_m"]["max"] <= 0.13
+    # Root height vs the person's: max 13.5 cm and RMS 3.0 cm measured since the clip's T-pose
+    # frame 0 is dropped (11.5 and 3.5 with it: the calibration and the metrics' alignment on a
+    # T-pose; 17.8 and 4.1 with flat soles at every push-off; issue 15 asks 5 cm: the rest is
+    # the take-off itself, the person's feet leaving the floor 30-60 ms before the detector
+    # says so, and the flight's apex). Bounds 15 and 3.9 cm: the chaotic clip's figures move
+    # by about 1.5 and 0.1-0.5 cm with any change.
+    assert m["pelvis_height_error_m"]["max"] <= 0.15
     assert m["pelvis_height_error_m"]["rms"] <= 0.039
 
 
