@@ -50,24 +50,13 @@ def arm_direction_errors(
         Columns :data:`ARM_SEGMENTS`: left upper arm, left forearm, right upper arm, right
         forearm.
     """
-    model = robot.model
-    data = model.createData()
-    keys = ("shoulder", "elbow", "wrist")
+    arms = _ArmDirections(robot)
+    sides = ("left", "right")
     out = np.empty((len(q_robot), 4))
     for k, q in enumerate(np.asarray(q_robot, float)):
         human = poser.model_keypoints(q_human[k])
-        pin.framesForwardKinematics(model, data, q)
-        col = 0
-        for side in ("left", "right"):
-            rob = {
-                n: data.oMf[model.getFrameId(robot.keyframes[f"{side}_{n}"])].translation
-                for n in keys
-            }
-            for a, b in (("shoulder", "elbow"), ("elbow", "wrist")):
-                u, v = rob[b] - rob[a], human[f"{side}_{b}"] - human[f"{side}_{a}"]
-                c = u @ v / (np.linalg.norm(u) * np.linalg.norm(v))
-                out[k, col] = np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
-                col += 1
+        target = np.concatenate([_unit_segments(human, s) for s in sides])
+        out[k] = _angles(arms.directions(q, sides), target)
     return out
 
 
@@ -165,11 +154,10 @@ def arm_direction_bound(
                 if best is None or sol.cost < best.cost:
                     best = sol
             assert best is not None
-            u = arms.directions(arms.config(best.x, q, idx, nb), group)
-            c = np.einsum("ij,ij->i", u.reshape(-1, 3), target.reshape(-1, 3))
+            e = _angles(arms.directions(arms.config(best.x, q, idx, nb), group), target)
             for i, s in enumerate(group):
                 col = 2 * sides.index(s)
-                out[k, col : col + 2] = np.degrees(np.arccos(np.clip(c[2 * i : 2 * i + 2], -1, 1)))
+                out[k, col : col + 2] = e[2 * i : 2 * i + 2]
     return out
 
 
@@ -180,6 +168,12 @@ def _unit_segments(points: dict[str, np.ndarray], side: str) -> np.ndarray:
     """(6,) unit directions of the upper arm and the forearm of ``side`` from key points."""
     u = [points[f"{side}_{b}"] - points[f"{side}_{a}"] for a, b in _SEGMENTS]
     return np.concatenate([v / np.linalg.norm(v) for v in u])
+
+
+def _angles(u: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Angles [deg] between the unit 3-vectors of ``u`` and ``h`` (both (3 n,)), pairwise."""
+    c = np.einsum("ij,ij->i", u.reshape(-1, 3), h.reshape(-1, 3))
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
 
 
 class _ArmDirections:

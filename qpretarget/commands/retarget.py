@@ -106,7 +106,6 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet and sys.stderr.isatty(),
     )
     wall = time.perf_counter() - t0
-    traj.meta["motion_notes"] = list(motion.meta.get("notes", []))
     with atomic_path(output, suffix=".npz") as tmp:
         traj.save(tmp)
     out = output

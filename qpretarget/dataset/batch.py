@@ -232,7 +232,6 @@ def _retarget_and_export(job: ClipJob) -> ClipResult:
     controller.reset()
     motion = load_motion(job.clip)
     run = Retargeter(controller).retarget(motion, progress=False)
-    run.meta["motion_notes"] = list(motion.meta.get("notes", []))
     run.meta["config_name"] = Path(job.config).name
     run.meta["config_sha256"] = job.config_sha256
     run.meta["source_clip"] = job.clip

@@ -507,7 +507,6 @@ class FootTargets:
                 if np.all(np.isfinite(ankle)):
                     q = (ankle + d.rotation @ feet.ankle_to_sole[side])[:2]
                     p[:2] = w * q + (1.0 - w) * p[:2]
-            h = heights.get(side)
             if h is not None and math.isfinite(h):
                 p[2] = ground + self.leg_scale * h
             lift = REACH_RAISE if other in rolled or flight else 0.0

@@ -238,7 +238,10 @@ class Retargeter:
                 f"of the excerpt (or in fewer than calibration.frames = "
                 f"{self.spec.calibration_frames}); nothing to calibrate the scaling on"
             )
-        return self.trajectory()
+        traj = self.trajectory()
+        # What the loader dropped or noticed (a T-pose frame 0: HumanMotion.without_leading_cut).
+        traj.meta["motion_notes"] = list(motion.meta.get("notes", []))
+        return traj
 
     # -------------------------------------------------------------------- online
     def start(

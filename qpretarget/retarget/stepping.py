@@ -200,6 +200,29 @@ def _flat(yaw: float, p: np.ndarray) -> pin.SE3:
     return pin.SE3(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.asarray(p, float))
 
 
+def _edge_turn(x_front: float, theta: float) -> pin.SE3:
+    r"""Pitch ``theta`` about the sole's front edge, in the sole frame.
+
+    :math:`(R_y(\theta),\ e - R_y(\theta) e)` with :math:`e = (x_{front}, 0, 0)`: the edge's
+    points stay in place.
+    """
+    c, s_ = math.cos(theta), math.sin(theta)
+    Ry = np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
+    edge = np.array([x_front, 0.0, 0.0])
+    return pin.SE3(Ry, edge - Ry @ edge)
+
+
+def _ramp(w: float, r: float, dt: float, rate_max: float, accel: float) -> float:
+    r"""Rate ``w`` one tick on towards the angle ``r`` still to turn, stopping there in time.
+
+    It moves by at most :math:`a\,dt` towards :math:`\operatorname{sign}(r) \min(|r| / dt,
+    \omega_{max}, \sqrt{2 a |r|})` (``r = 0``: it brakes to a stop).
+    """
+    mag = min(abs(r) / dt, rate_max, math.sqrt(2.0 * accel * abs(r)))
+    dw = accel * dt
+    return max(w - dw, min(w + dw, math.copysign(mag, r)))
+
+
 def blend_pose(a: pin.SE3, b: pin.SE3, w: float) -> pin.SE3:
     """Pose ``w`` of the way from ``a`` to ``b`` (straight line, geodesic rotation)."""
     R = a.rotation @ pin.exp3(w * pin.log3(a.rotation.T @ b.rotation))
@@ -379,17 +402,21 @@ class KinematicStepper:
             # tiptoe or in toe-off: the rise before a jump), or the heel rises while the other
             # foot is up and not about to be put down (a hop's push-off): the sole rolls onto
             # its toes with its contact kept.
+            other = _OTHER[side]
             on_toes = (
                 st.tiptoe
                 and rolls
-                and _OTHER[side] in self.toes
-                and (toe_rise or {}).get(_OTHER[side], 0.0) > 0.5 * st.toe_rise
-                and other_state in ("stance", "tiptoe", "toe_off")
-            ) or (
-                st.tiptoe
-                and rolls
-                and other_state in ("swing", "landing")
-                and not (low or {}).get(_OTHER[side], False)
+                and (
+                    (
+                        other in self.toes
+                        and (toe_rise or {}).get(other, 0.0) > 0.5 * st.toe_rise
+                        and other_state in ("stance", "tiptoe", "toe_off")
+                    )
+                    or (
+                        other_state in ("swing", "landing")
+                        and not (low or {}).get(other, False)
+                    )
+                )
             )
             if state == "stance":
                 settled = t - self._since[side] >= st.min_stance
@@ -627,11 +654,7 @@ class KinematicStepper:
         anchor = self._anchor[side]
         if theta <= 0.0:
             return anchor.copy()
-        x_front = self.toes[side][0]
-        c, s_ = math.cos(theta), math.sin(theta)
-        Ry = np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
-        edge = np.array([x_front, 0.0, 0.0])
-        return anchor * pin.SE3(Ry, edge - Ry @ edge)
+        return anchor * _edge_turn(self.toes[side][0], theta)
 
     def _unroll(self, side: str, sole: pin.SE3) -> None:
         r"""Stance anchor and roll of ``side`` from a sole that rolled without its contact.
@@ -642,11 +665,7 @@ class KinematicStepper:
         own front edge, flat on the ground, so that the rolled anchor is where the sole is.
         """
         theta = self._pitch_of(side, sole)
-        x_front = self.toes[side][0]
-        c, s_ = math.cos(theta), math.sin(theta)
-        Ry = np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
-        edge = np.array([x_front, 0.0, 0.0])
-        base = sole * pin.SE3(Ry, edge - Ry @ edge).inverse()
+        base = sole * _edge_turn(self.toes[side][0], theta).inverse()
         p = np.array([base.translation[0], base.translation[1], self.ground])
         self._anchor[side] = _flat(_yaw_of(base.rotation), p)
         self._roll[side] = theta
@@ -676,11 +695,8 @@ class KinematicStepper:
         st = self.settings
         goal = self.toe_angle(side, rise) if rise > 0.5 * st.toe_rise else 0.0
         old = self._roll[side]
-        r = goal - old
-        mag = min(abs(r) / self.dt, st.tiptoe_rate, math.sqrt(2.0 * st.tiptoe_accel * abs(r)))
-        w = self._roll_rate.get(side, 0.0)
-        dw = st.tiptoe_accel * self.dt
-        w = max(w - dw, min(w + dw, math.copysign(mag, r)))
+        w = _ramp(self._roll_rate.get(side, 0.0), goal - old, self.dt, st.tiptoe_rate,
+                  st.tiptoe_accel)  # fmt: skip
         new = max(0.0, min(st.toe_pitch, old + w * self.dt))
         if abs(goal - new) < 1e-9:
             new = goal
@@ -767,20 +783,13 @@ class KinematicStepper:
         towards 0 without a goal. ``None`` once the anchor is still.
         """
         st = self.settings
-        w = self._omega.get(side, 0.0)
-        dw = st.pivot_accel * self.dt
         anchor = self._anchor[side]
         base = _yaw_of(anchor.rotation)
         yaw_u = self._yaw_u.get(side)
         if yaw_u is None or abs(_wrap(yaw_u - base)) > 1e-6:
             yaw_u = base  # the anchor was set elsewhere (a landing): count from it
-        if goal is None:
-            target = 0.0
-        else:
-            r = goal - yaw_u
-            mag = min(abs(r) / self.dt, st.pivot_rate, math.sqrt(2.0 * st.pivot_accel * abs(r)))
-            target = math.copysign(mag, r)
-        w = max(w - dw, min(w + dw, target))
+        r = 0.0 if goal is None else goal - yaw_u
+        w = _ramp(self._omega.get(side, 0.0), r, self.dt, st.pivot_rate, st.pivot_accel)
         if abs(w) < 1e-9:
             self._omega.pop(side, None)
             return None
