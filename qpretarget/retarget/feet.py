@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -517,6 +518,18 @@ class FootTargets:
 
 #: Largest forward distance between the feet of the initial stance, in leg lengths.
 INITIAL_STRIDE = 0.8
+#: Highest start of a raised foot in a one-foot initial stance, in leg lengths (above the
+#: standing sole).
+INITIAL_RAISE = 0.5
+
+
+class InitialStance(NamedTuple):
+    """The run's initial posture: where the soles start and which of them stand."""
+
+    #: side -> sole pose.
+    soles: dict[str, pin.SE3]
+    #: Sides standing on the floor (both, or the one the person stands on).
+    standing: tuple[str, ...]
 
 
 def initial_soles(
@@ -526,7 +539,7 @@ def initial_soles(
     leg_lengths: Mapping[str, float],
     kp: Mapping[str, np.ndarray],
     height_off: float,
-) -> dict[str, pin.SE3] | None:
+) -> InitialStance | None:
     r"""The soles of the person's first-sample stance (the run's initial posture).
 
     With :math:`d = s\,R_a (a_l - a_r)` the person's ankle-to-ankle vector scaled by the
@@ -538,10 +551,17 @@ def initial_soles(
     at the first kicks), and so do the yaws (the feet's yaws are followed as changes from
     calibration).
 
-    Returns ``None`` (the robot starts from its reference posture) when an ankle of the person
-    is missing in the sample, or when the person does not stand on both feet: the lowest foot
-    key-points (ankle, toe, heel) of the two feet differ by more than ``height_off`` (the
-    detector's lift height), a foot is up and the robot lifts it at once.
+    A person standing on one foot (the lowest foot key-points, ankle, toe or heel, of the two
+    feet differ by more than ``height_off``, the detector's lift height) starts on that foot:
+    the other sole is placed the same way and raised by :math:`s\,\Delta z` (the difference of
+    the two lowest points, within :data:`INITIAL_RAISE` leg lengths), flat; ``standing`` then
+    names the lower foot only. Otherwise the raised foot kept the person's first-sample offset
+    through the whole run: each foot's later spots are the person's displacements from the
+    first sample added to the robot's (``absolute`` placement), and the robot's raised foot
+    started on the floor beside the other (CMU 49_18, one-leg balance: 0.19 m scaled stagger).
+
+    Returns ``None`` (the robot starts from its reference posture) when an ankle or a foot's
+    lowest point of the person is missing in the sample.
     """
     ankles = [kp.get(f"{side}_ankle") for side in SIDES]
     if any(a is None or not np.all(np.isfinite(a)) for a in ankles):
@@ -550,7 +570,7 @@ def initial_soles(
     for side in SIDES:
         z = [float(kp[f"{side}_{p}"][2]) for p in ("ankle", "toe", "heel") if f"{side}_{p}" in kp]
         lows.append(min((v for v in z if math.isfinite(v)), default=math.nan))
-    if not abs(lows[0] - lows[1]) <= height_off:
+    if not all(math.isfinite(v) for v in lows):
         return None
     psi = yaw_of(feet.sole_ref["left"].rotation[:, 0])
     fwd_axis = np.array([math.cos(psi), math.sin(psi), 0.0])
@@ -562,7 +582,20 @@ def initial_soles(
     for side, sign in (("left", 1.0), ("right", -1.0)):
         ref = feet.sole_ref[side]
         out[side] = pin.SE3(ref.rotation.copy(), ref.translation + sign * 0.5 * fwd * fwd_axis)
-    return out
+    if abs(lows[0] - lows[1]) <= height_off:
+        return InitialStance(out, SIDES)
+    up = 0 if lows[0] > lows[1] else 1
+    raise_z = min(leg_scale * abs(lows[0] - lows[1]), INITIAL_RAISE * leg)
+    out[SIDES[up]].translation[2] += raise_z
+    return InitialStance(out, (SIDES[1 - up],))
 
 
-__all__ = ["FOOT_YAW_RANGE", "FOOT_YAW_RATE", "INITIAL_STRIDE", "FootTargets", "initial_soles"]
+__all__ = [
+    "FOOT_YAW_RANGE",
+    "FOOT_YAW_RATE",
+    "INITIAL_RAISE",
+    "INITIAL_STRIDE",
+    "FootTargets",
+    "InitialStance",
+    "initial_soles",
+]

@@ -451,6 +451,8 @@ class Retargeter:
         #: Last time the person was in flight [s].
         self._flight_t = -math.inf
         self._feet_warned = False
+        #: Feet standing at the run's first tick (the initial stance may start on one foot).
+        self._initial_standing: tuple[str, ...] = SIDES
         self._first_targets: dict[str, tuple[np.ndarray | None, np.ndarray | None]] = {}
         self._rooting: Rooting | None = None
         if self.support is not None:
@@ -517,23 +519,28 @@ class Retargeter:
         that sample, rooted at those soles; the controller, contacts off, runs on these fixed
         targets until the floating base and the soles are still (every coordinate slower than
         :data:`INITIAL_SETTLED` m/s; at most :data:`INITIAL_TICKS` ticks, none recorded) and is
-        reset there at rest, both contacts anchored where the soles came to rest. The run's
-        first tick starts from that posture, the person's stance, instead of the reference
-        posture with the feet side by side (a clip starting mid-stride then kept the offset of
-        the foot behind through the whole run). Online and offline do the same at the same
-        sample.
+        reset there at rest, the standing soles' contacts anchored where they came to rest. The
+        run's first tick starts from that posture, the person's stance, instead of the
+        reference posture with the feet side by side (a clip starting mid-stride then kept the
+        offset of the foot behind through the whole run). A person on one foot at that sample
+        gets a robot on the same foot, the other sole raised where the person's is and in
+        swing from the first tick (rooted at the standing foot, Poubel eq. 1). Online and
+        offline do the same at the same sample.
         """
         ctrl, feet, cal = self.controller, self._fs, self._cal
         stream = self._require_stream()
         kp, rots, missing = stream.unpack(y)
-        soles = initial_soles(
+        stance = initial_soles(
             feet, cal, self._leg_scale, self.leg_lengths, kp, self._sup.detection.height_off
         )
-        if soles is None or self._rooting is None:
+        if stance is None or self._rooting is None:
             return
+        soles = stance.soles
         human = {k: kp[k] for k in cal.tree}
         anchors = {s: feet.ankle_of(s, soles[s]) for s in SIDES}
-        scaled = self._rooting.scale_from(human, "double", anchors)
+        # Rooted at the standing foot (Poubel eq. 1) when the person stands on one.
+        root = "double" if len(stance.standing) == 2 else stance.standing[0]
+        scaled = self._rooting.scale_from(human, root, anchors)
         ctrl.set_contacts([])
 
         def targets(w: float) -> dict[str, Any]:
@@ -564,7 +571,8 @@ class Retargeter:
                 break
             before = now
         ctrl.reset(ctrl.q.copy())
-        ctrl.set_contacts([fb.contact for fb in self._sup.feet.values()])
+        ctrl.set_contacts([self._sup.feet[s].contact for s in stance.standing])
+        self._initial_standing = stance.standing
         if "waist" in self.robot_map.keypoints:
             waist = self.com_estimate.robot_point("waist", ctrl.state.data)
             self._rooting.waist_height = float(waist[2])
@@ -742,7 +750,7 @@ class Retargeter:
         )  # the floating base's heading (quaternion x, y, z, w at q[3:7])
         heading = (yaw, waist_dyaw())
         if not stepper.started:
-            stepper.reset(t, soles, human_foot)
+            stepper.reset(t, soles, human_foot, standing=self._initial_standing)
             ft.start(kp, soles, heading)
         heights = dict(self.detector.height)
         # Swing targets the legs cannot reach are raised in flight and for lift_time after it

@@ -115,8 +115,9 @@ class StepSettings:
             the person's foot is.
         initial_stance: Start the run in the person's first-sample stance (the soles where the
             scaled person's feet are, solved to convergence before the first tick,
-            :func:`~qpretarget.retarget.feet.initial_soles`) instead of the robot's reference
-            posture with the feet side by side.
+            :func:`~qpretarget.retarget.feet.initial_soles`; on one foot, the other raised,
+            when the person stands on one) instead of the robot's reference posture with the
+            feet side by side.
         absolute: Swing soles aim at the scaled person's foot positions in the world (each
             ankle's displacement since the first sample, scaled and turned by the calibration
             heading, added to the robot ankle's first position: the frame of the human-referenced
@@ -327,21 +328,32 @@ class KinematicStepper:
         t: float,
         soles: Mapping[str, pin.SE3],
         human_foot: Mapping[str, tuple[float, np.ndarray] | None] | None = None,
+        standing: tuple[str, ...] = SIDES,
     ) -> None:
-        """Start with both feet in stance where they are (the robot starts standing)."""
-        self.ground = float(np.mean([soles[s].translation[2] for s in SIDES]))
-        self.states = {s: "stance" for s in SIDES}
+        """Start with the ``standing`` feet in stance where they are, the others in swing.
+
+        The ground is the standing soles' mean height. A foot not standing (a run that starts
+        on one foot: :func:`~qpretarget.retarget.feet.initial_soles`) starts in swing from
+        where it is, as if it had just lifted there.
+        """
+        if not standing or any(s not in SIDES for s in standing):
+            raise ValueError(f"standing must name at least one of {SIDES}, got {standing!r}")
+        self.ground = float(np.mean([soles[s].translation[2] for s in standing]))
+        self.states = {s: ("stance" if s in standing else "swing") for s in SIDES}
         self._since = {s: t for s in SIDES}
         self._anchor = {s: soles[s].copy() for s in SIDES}
         self._landing, self._target, self._pivot, self._lift = {}, {}, {}, {}
         self._omega, self._yaw_u = {}, {}
         self._toe_down, self._toe_armed, self._restep = set(), set(), set()
         self._roll, self._roll_rate = {}, {}
+        for side in SIDES:
+            if side not in standing:
+                self._lift[side] = (t, soles[side].copy())
         for side, foot in (human_foot or {}).items():
-            if foot is not None:
+            if foot is not None and side in standing:
                 yaw0 = _yaw_of(soles[side].rotation)
                 self._start_pivot(side, foot, yaw0)
-        self.log = [(t, "stance/stance")]
+        self.log = [(t, "/".join(self.states[s] for s in SIDES))]
         self._started = True
 
     # ------------------------------------------------------------------------------ the tick
