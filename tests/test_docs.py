@@ -350,6 +350,9 @@ NO_EFFECT: dict[tuple[str, str, str], str] = {
     ("constraints", "self_collision", "broad_phase"): "conservative: it only skips pairs that "
     "provably stay beyond d_i, so the rows and the result are the same (faster)",
     ("constraints", "ground", "broad_phase"): "conservative: same rows, same result (faster)",
+    ("constraints", "ground", "plane_trust"): "loosens the trust-region box only; the scripted "
+    "motion's ground rows never reach it (its effect: tests/constraints/test_ground.py, "
+    "test_kernel.py and the seven clips in docs/retargeting.md)",
     ("constraints", "support_polygon", "max_edges"): "rows reserved for the polygon's edges: any "
     "value that fits the hull gives the same polygon (a smaller one is a ConfigError)",
     ("constraints", "self_collision", "use_srdf"): "G1 ships no SRDF, so there are no disabled "

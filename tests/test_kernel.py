@@ -297,6 +297,43 @@ def test_self_collision_damper_compiled_equals_python(shared_dir: Path, pairs: s
 
 
 @needs_kernel
+def test_plane_trust_region_compiled_equals_python(
+    shared_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The trust region of pairs against a plane (``ground`` ``plane_trust``: a rotation bounded
+    by its tilt from the normal, ``DistanceDamper.compute_bounds``) in the kernel and in Python.
+    ``ground`` disarms standing links, which the kernel does not do, so it runs in Python; a
+    test subclass without disarming (knees and hands within d_i = 0.3 m of the floor, a 2 um
+    trust region so that the box binds) puts the same rows and box in the kernel: workload B,
+    80 ticks, 1e-10 (measured 6e-15; the two part after ~90 ticks with or without
+    ``plane_trust``, and at once with a knee hull under a raised floor: the kernel's ground
+    pairs are not used in a run and are not otherwise checked)."""
+    from qpretarget.constraints import CONSTRAINTS
+    from qpretarget.constraints.ground import Ground
+
+    class CompiledGround(Ground):
+        disarms_rows = False
+
+    monkeypatch.setitem(CONSTRAINTS, "compiled_ground_test", CompiledGround)
+    cfg, targets, q0, q_nom = _workload(shared_dir, "B")
+    cfg["constraints"].append(
+        {"type": "compiled_ground_test", "links": ["left_knee", "right_knee", "left_hand",
+         "right_hand"], "d_i": 0.3, "trust_region": 2e-6, "plane_trust": True}
+    )  # fmt: skip
+    ctrl = Controller(cfg)
+    con = next(c for c in ctrl.constraints if isinstance(c, CompiledGround))
+    assert con._planar.all()  # every pair is against the floor
+    assert ctrl.compiled is not None and ctrl.compiled.computes_box(con), ctrl.compiled_reason
+    q_c = _run(cfg, targets, q0, q_nom, 80)
+    with python_only():
+        q_p = _run(cfg, targets, q0, q_nom, 80)
+    err = np.abs(q_c - q_p).max()
+    assert err <= 1e-10, f"compiled vs Python: {err:.2e}"
+    cfg["constraints"][-1]["plane_trust"] = False  # the bound is at work: another run without it
+    assert np.abs(_run(cfg, targets, q0, q_nom, 80) - q_c).max() > 1e-6  # measured 1.8e-5
+
+
+@needs_kernel
 @pytest.mark.parametrize(
     "config",
     ["g1_whole_body.yaml", "g1_augmentation.yaml", "crac_ts1_velocity_crac.yaml",

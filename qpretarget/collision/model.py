@@ -39,6 +39,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+import coal
 import numpy as np
 import pinocchio as pin
 
@@ -511,6 +512,22 @@ class CollisionModel:
         ga, gb = self._ga[pairs], self._gb[pairs]
         lever = np.maximum(self._rot_lever[ga], self._rot_lever[gb])
         return lever * (1.0 - self._support[ga] * self._support[gb])
+
+    def pair_planes(self) -> np.ndarray:
+        """(P, 3) world unit normal of the static half-space of each pair, zero for other pairs.
+
+        A pair against a plane (the ground, a half-space obstacle) has a distance whose
+        second-order change under a rotation depends on the rotation axis's tilt from the
+        normal (:meth:`qpretarget.constraints.self_collision.DistanceDamper.compute_bounds`).
+        """
+        out = np.zeros((self.n_pairs, 3))
+        for k, (a, b) in enumerate(zip(self._ga, self._gb, strict=True)):
+            for g in (a, b):
+                s = self.shapes[g]
+                if s.joint == 0 and isinstance(s.geometry, coal.Halfspace):
+                    n = s.placement.rotation @ np.asarray(s.geometry.n, dtype=float)
+                    out[k] = n / np.linalg.norm(n)
+        return out
 
     def compute_all(
         self, state: RobotState

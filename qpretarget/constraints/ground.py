@@ -30,6 +30,7 @@ import pinocchio as pin
 from ..collision import CollisionModel, LinkShape, link_shapes, obstacle_shape
 from ..errors import ConfigError, UnknownNameError
 from ..robot import RobotModel, RobotState
+from ..validation import check_bool
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
 from .contacts import Contacts
 from .self_collision import DistanceDamper, resolve_link
@@ -61,6 +62,13 @@ class Ground(DistanceDamper):
         max_rows: cap on the QP rows (default one per pair).
         broad_phase: skip pairs that provably stay beyond :math:`d_i`.
         trust_region: tolerated linearization error [m] (see :mod:`.self_collision`).
+        plane_trust: bound each rotation in the trust region by its second-order change of
+            height, :math:`\sqrt{2\varepsilon / (r\,|n \times a|)}` for an axis :math:`a` and
+            the plane's normal :math:`n`, instead of :math:`\sqrt{2\varepsilon / r}` (a turn
+            about the vertical is then free; see
+            :meth:`~.self_collision.DistanceDamper.compute_bounds`). Off by default: on G1 it
+            lets the legs turn faster than the contact rows hold a stance foot (measured in
+            docs/retargeting.md).
         hull_vertices: lighter conservative hulls (see :mod:`.self_collision`).
         name: constraint name.
 
@@ -90,6 +98,7 @@ class Ground(DistanceDamper):
         max_rows: int | None = None,
         broad_phase: bool = True,
         trust_region: float | None = 2e-4,
+        plane_trust: bool = False,
         hull_vertices: int | None = None,
         name: str | None = None,
     ) -> None:
@@ -99,6 +108,7 @@ class Ground(DistanceDamper):
             broad_phase=broad_phase, trust_region=trust_region, hull_vertices=hull_vertices,
             name=name,
         )  # fmt: skip
+        self.plane_trust = check_bool(plane_trust, "plane_trust")
         if links is not None and (isinstance(links, str) or not isinstance(links, Sequence)):
             raise ConfigError(f"links must be a list of link names, got {links!r}.")
         if obstacles is not None and (

@@ -46,6 +46,10 @@ from .base import CONSTRAINTS, Constraint, ConstraintBlock
 
 #: Smallest trust-region scale (the step bound shrinks at most by its square root, 1/64).
 MIN_TRUST_SCALE = 1.0 / 4096
+#: Smallest sine of the angle between a rotation axis and a pair's plane normal in the trust
+#: region (a turn about the normal changes no distance to the plane; the bound of such a turn is
+#: then 1000 times the lever bound instead of infinite).
+MIN_PLANE_SINE = 1e-6
 #: QP rows of an ``auto`` pair set unless ``max_rows`` says otherwise.
 AUTO_MAX_ROWS = 24
 #: ``trust_gap_fraction`` of an ``auto`` pair set unless given: a pair's linearization may err by
@@ -168,6 +172,9 @@ class DistanceDamper(Constraint):
         self.broad_phase = bool(broad_phase)
         #: Trust region of a pair: max(trust_region, trust_gap * (d - safety)) (0: fixed).
         self.trust_gap = 0.0
+        #: Bound the rotations of a pair against a static plane by their second-order change of
+        #: distance to it, |n x a_j| (compute_bounds), rather than by their lever alone.
+        self.plane_trust = False
         self.model: CollisionModel | None = None
         self.pairs: list[tuple[str, str]] = []
         self.safety = np.zeros(0)
@@ -213,6 +220,11 @@ class DistanceDamper(Constraint):
         eps = self.trust_region if self.trust_region is not None else np.inf
         with np.errstate(divide="ignore"):  # inf where no rotation moves the pair
             self._step0 = np.sqrt(2.0 * eps / self.model.pair_levers(np.arange(P)))
+        # Pairs against a static plane (the ground, a half-space obstacle): its world normal
+        # (zero for the other pairs, and for all without plane_trust).
+        self._plane = self.model.pair_planes() * float(self.plane_trust)
+        self._planar: np.ndarray = np.asarray(self._plane.any(axis=1))
+        self._has_plane = bool(self._planar.any())
         self._fp_w = np.random.default_rng(0).standard_normal(robot.nq)
         self._fp = np.nan
         self._fp_state: Any = None
@@ -256,9 +268,11 @@ class DistanceDamper(Constraint):
             m.gmodel, m.gdata, m.distances, np.ascontiguousarray(m._pair_lever, dtype=float),
             np.ascontiguousarray(m._support, dtype=float), m._ga.tolist(), m._gb.tolist(),
             np.ascontiguousarray(self.safety, dtype=float),
-            np.ascontiguousarray(self._step0, dtype=float), m.broad_phase, m.hysteresis,
-            m.rank_margin, self.d_i, self.d_s, form, self.gain_value, self.recovery_speed,
-            -1.0 if self.trust_region is None else self.trust_region, self.trust_gap,
+            np.ascontiguousarray(self._step0, dtype=float),
+            np.ascontiguousarray(self._plane, dtype=float), MIN_PLANE_SINE, m.broad_phase,
+            m.hysteresis, m.rank_margin, self.d_i, self.d_s, form, self.gain_value,
+            self.recovery_speed, -1.0 if self.trust_region is None else self.trust_region,
+            self.trust_gap,
             MIN_TRUST_SCALE, self.n_rows, self._direct, self._nearest or 0,
         )  # fmt: skip
         self._kd_new = (tick, int(kid))
@@ -380,6 +394,31 @@ class DistanceDamper(Constraint):
         accurate one. Far from the speeds of a tracking motion (G1 arm, :math:`\varepsilon` =
         0.2 mm: 2-6 rad/s), it stops the two-tick oscillations that full-error-correction tasks
         start against active rows, and with them the violations of :math:`d_s`.
+
+        With ``plane_trust`` (:class:`~qpretarget.constraints.ground.Ground`), against a static
+        plane of unit normal :math:`n` (the ground, a half-space obstacle) the estimate is
+        sharper: a rotation :math:`\theta` about a unit axis :math:`a` moves a point at
+        :math:`r` (from a point of the axis) to
+        :math:`r + \theta\, a \times r + \tfrac{\theta^2}{2}\, a \times (a \times r) + O(\theta^3)`
+        (Taylor expansion of :math:`e^{\theta [a]_\times} r`), so its distance to the plane
+        departs from the first-order prediction by the second-order term
+
+        .. math::
+            \tfrac{\theta^2}{2}\, n^\top \big(a \times (a \times r)\big)
+            = -\tfrac{\theta^2}{2}\, n^\top r_\perp, \qquad
+            |n^\top r_\perp| \le |n \times a|\, |r_\perp| \le |n \times a|\, r_{pj},
+
+        :math:`r_\perp` the part of :math:`r` normal to :math:`a` (in that plane :math:`n`'s
+        projection has length :math:`|n \times a|`). Such a pair's bound is therefore
+        :math:`\sqrt{2 s_p \varepsilon / (r_{pj}\, |n \times a_j|)}`, :math:`a_j` coordinate
+        :math:`j`'s rotation axis in the world at this tick (the angular rows of the WORLD
+        Jacobian ``data.J``: a revolute joint's axis; for the free-flyer's angular coordinates,
+        local, the columns of the base rotation). A turn about the normal (the base's yaw with
+        the pelvis upright) changes no height and is not bounded (the sine is floored at
+        :data:`MIN_PLANE_SINE`); a tilted axis is bounded by its tilt. As for every pair, the
+        bound is per coordinate: the cross terms of simultaneous rotations are left to the
+        adaptation of :math:`s_p` (a turn about the normal applied outermost, the base's yaw,
+        has none: it keeps every height).
         """
         if self.trust_region is None:
             return None
@@ -389,6 +428,8 @@ class DistanceDamper(Constraint):
         if pairs.size == 0:
             return None
         step = self._step0[pairs]
+        if self._has_plane:
+            self._plane_steps(state, pairs, step)
         if self.trust_gap > 0:  # a pair far from its safety distance tolerates a larger error
             assert self.model is not None and self.trust_region is not None
             gap = self.model.distances[pairs] - self.safety[pairs]
@@ -401,6 +442,17 @@ class DistanceDamper(Constraint):
         np.negative(self._tr_ub, out=self._tr_lb)
         self._t_acc += time.perf_counter() - t0
         return self._tr_lb, self._tr_ub
+
+    def _plane_steps(self, state: RobotState, pairs: np.ndarray, step: np.ndarray) -> None:
+        r"""Scale ``step`` (k, nv) in place by :math:`|n \times a_j|^{-1/2}` on planar pairs."""
+        on = np.flatnonzero(self._planar[pairs])
+        if on.size == 0:
+            return
+        A = state.data.J[3:6]  # (3, nv) world rotation axes of the coordinates (0: translations)
+        a2 = (A * A).sum(axis=0)
+        na = self._plane[pairs[on]] @ A  # (m, nv): n . a_j
+        sin2 = 1.0 - na * na / np.where(a2 > 0.0, a2, 1.0)
+        step[on] *= np.maximum(sin2, MIN_PLANE_SINE**2) ** -0.25
 
     def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
         self._update(state)

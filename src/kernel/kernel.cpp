@@ -304,7 +304,9 @@ static double sq(double x) { return x * x; }
 // distances of the candidates (capped rows: only what the K smallest gaps need), the rows
 // -dd/dq v <= max(rate (d - d_s), -recovery) (Faverjon-Tournassoud velocity damper, CRAC eq. 22-27
 // distances), the trust-region box |v_j| dt <= sqrt(2 s_p eps / r_pj) with its adaptation from
-// the last tick's first-order prediction, and that prediction after the step. Same operations, in
+// the last tick's first-order prediction, and that prediction after the step; a pair against a
+// static plane of normal n bounds coordinate j by that divided by sqrt|n x a_j|, a_j its world
+// rotation axis (the second-order change of a height, DistanceDamper.compute_bounds). Same operations, in
 // the same order, as the Python modules; the Python object keeps its configuration and reads the
 // results through this object.
 struct DamperK : BoundsK {
@@ -315,6 +317,9 @@ struct DamperK : BoundsK {
   nb::object keep_gm, keep_gd;
   int P = 0, nv = 0, row = 0, n_rows = 0;
   RowMat pair_lever, support, step0;  // (P, nv), (nbodies, nv), (P, nv)
+  RowMat plane;                       // (P, 3) world normal of a pair's static half-space, or 0
+  std::vector<char> planar;           // pair against a plane
+  double min_plane_sine = 1e-6;
   std::vector<int> ga, gb;
   Eigen::VectorXd safety;
   bool broad_phase = true, direct = true, has_nearest = false;
@@ -515,8 +520,17 @@ struct DamperK : BoundsK {
       double f = 1.0;
       if (trust_gap > 0) f = std::sqrt(std::max(1.0, trust_gap * (dist.p[pi] - safety[pi]) / trust));
       double sc = scaled ? sqrt_scale[pi] : 1.0;
+      const bool pl = planar[pi] != 0;
+      const double s2min = min_plane_sine * min_plane_sine;
       for (int j = 0; j < nv; ++j) {
         double st = step0(pi, j);
+        if (pl) {  // |n x a_j|^(-1/2), a_j = angular rows of the WORLD Jacobian's column j
+          double ax = d->J(3, j), ay = d->J(4, j), az = d->J(5, j);
+          double a2 = ax * ax + ay * ay + az * az;
+          double na = plane(pi, 0) * ax + plane(pi, 1) * ay + plane(pi, 2) * az;
+          double sin2 = 1.0 - na * na / (a2 > 0.0 ? a2 : 1.0);
+          st = st * std::pow(std::max(sin2, s2min), -0.25);
+        }
         if (trust_gap > 0) st = st * f;
         if (scaled) st = st * sc;
         ub[j] = std::min(ub[j], st);
@@ -1187,7 +1201,8 @@ struct Tick {
     polygons.push_back(std::move(pk));
   }
   int add_damper(nb::handle gmodel, nb::handle gdata, Arr distances, CArr pair_lever, CArr support,
-                 std::vector<int> ga, std::vector<int> gb, CArr safety, CArr step0, bool broad_phase,
+                 std::vector<int> ga, std::vector<int> gb, CArr safety, CArr step0, CArr plane,
+                 double min_plane_sine, bool broad_phase,
                  double hysteresis, double rank_margin, double d_i, double d_s, int rate_form,
                  double rate_value, double recovery, double trust, double trust_gap,
                  double min_scale, int n_rows, bool direct, int nearest) {
@@ -1202,6 +1217,10 @@ struct Tick {
     dk->pair_lever = Eigen::Map<const RowMat>(pair_lever.data(), P, nv);
     dk->support = Eigen::Map<const RowMat>(support.data(), support.size() / nv, nv);
     dk->step0 = Eigen::Map<const RowMat>(step0.data(), P, nv);
+    dk->plane = Eigen::Map<const RowMat>(plane.data(), P, 3);
+    dk->planar.assign(P, 0);
+    for (int i = 0; i < P; ++i) dk->planar[i] = dk->plane.row(i).squaredNorm() > 0.0;
+    dk->min_plane_sine = min_plane_sine;
     dk->ga = ga;
     dk->gb = gb;
     dk->safety = Eigen::Map<const Eigen::VectorXd>(safety.data(), P);

@@ -142,3 +142,42 @@ def test_bad_ground_configurations(g1):
         Ground(obstacles=[{"name": "b", "shape": "sphere", "radius": 0.1}] * 2).bind(g1)
     with pytest.raises(ConfigError, match="links must be a list"):
         Ground(links="left_hand")
+
+
+def _trust_box(g1, plane_trust: bool, rpy: tuple[float, float, float]) -> np.ndarray:
+    con = Ground(links=["left_knee"], d_i=1.0, plane_trust=plane_trust)
+    con.bind(g1)
+    state = RobotState(g1)
+    q = g1.q_reference.copy()
+    q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(*rpy)).coeffs()
+    state.update(q)
+    con.reset(state)
+    box = con.compute_bounds(state, 0.01)
+    assert box is not None
+    return box[1] * 0.01  # |v_j| dt bound [rad]
+
+
+def test_plane_trust_bounds_a_rotation_by_its_tilt_from_the_normal(g1):
+    # Knee above the ground: a rotation theta about a unit axis a changes a height to second
+    # order by -theta^2/2 n.r_perp, |n.r_perp| <= |n x a| r, so the bound sqrt(2 eps / r) becomes
+    # sqrt(2 eps / (r |n x a|)). Upright base: its local z is the normal (sine floored at 1e-6:
+    # 1000x the lever bound, no cap at a tracking speed), local x and y are horizontal (the lever
+    # bound, unchanged). Base rolled 30 deg: local z is 30 deg off the normal, bound x sqrt(2).
+    off, on = _trust_box(g1, False, (0, 0, 0)), _trust_box(g1, True, (0, 0, 0))
+    assert np.all(np.isfinite(on[3:6])) and off[5] < 0.03  # a cap of <= 3 rad/s at dt = 10 ms
+    np.testing.assert_allclose(on[5], 1000.0 * off[5], rtol=1e-6)
+    np.testing.assert_allclose(on[3:5], off[3:5], rtol=1e-12)
+    assert np.all(on[:3] == np.inf) and np.all(off[:3] == np.inf)  # translations are exact
+    off, on = _trust_box(g1, False, (np.pi / 6, 0, 0)), _trust_box(g1, True, (np.pi / 6, 0, 0))
+    np.testing.assert_allclose(on[5], off[5] * np.sqrt(2.0), rtol=1e-9)
+    np.testing.assert_allclose(on[3], off[3], rtol=1e-12)  # local x: still horizontal
+    # Local y, rolled 30 deg: (0, cos 30, sin 30), so |n x a| = cos 30 deg.
+    np.testing.assert_allclose(on[4], off[4] / np.sqrt(np.cos(np.pi / 6)), rtol=1e-9)
+    # The left leg's joints: each bounded by its own axis's tilt, never below the lever bound.
+    leg = slice(6, 12)
+    assert np.all(on[leg] >= off[leg] * (1 - 1e-12))
+
+
+def test_plane_trust_is_a_checked_bool(g1):
+    with pytest.raises(ConfigError, match="plane_trust"):
+        Ground(plane_trust="yes")
