@@ -552,13 +552,18 @@ def initial_soles(
     calibration).
 
     A person standing on one foot (the lowest foot key-points, ankle, toe or heel, of the two
-    feet differ by more than ``height_off``, the detector's lift height) starts on that foot:
-    the other sole is placed the same way and raised by :math:`s\,\Delta z` (the difference of
-    the two lowest points, within :data:`INITIAL_RAISE` leg lengths), flat; ``standing`` then
-    names the lower foot only. Otherwise the raised foot kept the person's first-sample offset
+    feet differ by more than ``height_off``, the detector's lift height) starts on that foot,
+    placed as above; the other sole, flat, is put where the scaled person's foot is from it:
+    :math:`d_f` forward, the person's lateral offset across (not narrower than the robot's
+    stance width unless higher than :data:`CROSS_HEIGHT`, as a swing foot), raised by
+    :math:`s\,\Delta z` (the difference of the two lowest points, within
+    :data:`INITIAL_RAISE` leg lengths); ``standing`` then names the lower foot only. Before,
+    the robot started on both feet and its raised foot kept the person's first-sample offset
     through the whole run: each foot's later spots are the person's displacements from the
     first sample added to the robot's (``absolute`` placement), and the robot's raised foot
-    started on the floor beside the other (CMU 49_18, one-leg balance: 0.19 m scaled stagger).
+    started on the floor beside the other (CMU 49_18, one-leg balance: ankle error 0.19 leg
+    lengths; with the raised sole at the robot's stance width instead of the person's 0.33 m,
+    Talos's leg ended inside the person's and crouched under its target, 26 cm).
 
     Returns ``None`` (the robot starts from its reference posture) when an ankle or a foot's
     lowest point of the person is missing in the sample.
@@ -584,10 +589,24 @@ def initial_soles(
         out[side] = pin.SE3(ref.rotation.copy(), ref.translation + sign * 0.5 * fwd * fwd_axis)
     if abs(lows[0] - lows[1]) <= height_off:
         return InitialStance(out, SIDES)
+    # On one foot: the raised sole where the scaled person's is from the standing one (its
+    # forward part within INITIAL_STRIDE; across, the person's offset, not narrower than the
+    # robot's stance width unless the foot is higher than CROSS_HEIGHT, as a swing foot).
     up = 0 if lows[0] > lows[1] else 1
+    raised, standing = SIDES[up], SIDES[1 - up]
+    sign = 1.0 if raised == "left" else -1.0  # d is left minus right: sign d = raised - standing
+    lat_axis = np.array([-math.sin(psi), math.cos(psi), 0.0])
+    ref = feet.sole_ref
+    width = float(lat_axis @ (ref["left"].translation - ref["right"].translation))
     raise_z = min(leg_scale * abs(lows[0] - lows[1]), INITIAL_RAISE * leg)
-    out[SIDES[up]].translation[2] += raise_z
-    return InitialStance(out, (SIDES[1 - up],))
+    lat = float(lat_axis @ d)  # the raised foot's offset towards its own side
+    if raise_z <= CROSS_HEIGHT:
+        lat = max(lat, width)
+    stand = out[standing].translation
+    p = stand + sign * (fwd * fwd_axis + lat * lat_axis)
+    p[2] = stand[2] + raise_z
+    out[raised] = pin.SE3(out[raised].rotation, p)
+    return InitialStance(out, (standing,))
 
 
 __all__ = [

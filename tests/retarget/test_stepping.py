@@ -348,8 +348,10 @@ def test_the_initial_stance_is_the_persons_first_stance():
     stance = initial_soles(feet, cal, s, rt.leg_lengths, first, 0.05)
     assert stance is not None and stance.standing == ("left", "right")
     # A person standing on one foot at the first sample (the right 8 cm higher, over the 5 cm
-    # lift height): the robot starts on the left, the right sole placed forward as before and
-    # raised by s times the height of its lowest point over the left's, flat.
+    # lift height): the robot starts on the left, placed as before; the right sole, flat, where
+    # the scaled person's foot is from the left one (forward as before; across, the person's
+    # offset but not narrower than the robot's stance width, the foot being lower than
+    # CROSS_HEIGHT), raised by s times the height of its lowest point over the left's.
     kp = {k: np.asarray(v, float).copy() for k, v in first.items()}
     for p in ("ankle", "toe"):
         kp[f"right_{p}"][2] += 0.08
@@ -357,11 +359,30 @@ def test_the_initial_stance_is_the_persons_first_stance():
     assert one is not None and one.standing == ("left",)
     for x in ("left", "right"):
         assert np.allclose(one.soles[x].rotation, stance.soles[x].rotation, atol=1e-12)
-        assert np.allclose(one.soles[x].translation[:2], stance.soles[x].translation[:2])
+    left, right = one.soles["left"].translation, one.soles["right"].translation
+    assert np.allclose(left, stance.soles["left"].translation)
+    assert left[0] - right[0] == pytest.approx(fwd, abs=1e-9)  # reference heading along x
+    width = ref["left"][1] - ref["right"][1]
+    assert left[1] - right[1] == pytest.approx(max(d[1], width), abs=1e-9)
     low = {x: min(kp[f"{x}_{p}"][2] for p in ("ankle", "toe", "heel") if f"{x}_{p}" in kp)
            for x in ("left", "right")}  # fmt: skip
-    up = one.soles["right"].translation[2] - stance.soles["right"].translation[2]
+    up = right[2] - stance.soles["right"].translation[2]
     assert up == pytest.approx(s * (low["right"] - low["left"]), abs=1e-9)
+    # The person's right foot held 0.3 m out to the side, and 0.3 m across the left one's line,
+    # 28 cm up (over CROSS_HEIGHT, scaled): the person's offsets, crossing allowed.
+    for p in ("ankle", "toe"):
+        kp[f"right_{p}"][2] += 0.20
+    for y in (-0.3, 0.3):
+        kq = {k: v.copy() for k, v in kp.items()}
+        lateral = cal.rotation.T @ np.array([0.0, y, 0.0])  # the person's frame: 0.3 m across
+        for p in ("ankle", "toe", "heel"):
+            if f"right_{p}" in kq:
+                up_z = [0.0, 0.0, kq[f"right_{p}"][2] - kq[f"left_{p}"][2]]
+                kq[f"right_{p}"] = kq[f"left_{p}"] + lateral + up_z
+        side = initial_soles(feet, cal, s, rt.leg_lengths, kq, 0.05)
+        assert side is not None and side.standing == ("left",)
+        dy = side.soles["left"].translation[1] - side.soles["right"].translation[1]
+        assert dy == pytest.approx(-s * y, abs=1e-6)
     assert one.soles["left"].translation[2] == stance.soles["left"].translation[2]
     # A foot key-point missing: the reference posture.
     del kp["right_ankle"]
@@ -484,13 +505,13 @@ def test_the_robot_stands_on_one_leg_when_the_person_does():
     # (the rest is the detection delay, about 40 ms at each lift and touch-down).
     assert m["lift_agreement"] >= 0.95
     assert m["stance_slip_mm"]["max"] < 1.0
-    # Issue 15: pelvis height within 5 cm of the scaled person's (4.7 cm measured; 3.8 cm when
+    # Issue 15: pelvis height within 5 cm of the scaled person's (4.0 cm measured; 3.8 cm when
     # the run started on both feet; 35 cm while the raised foot's yaw was not measured and the
     # leg went over the back) and the heading with the person's (4.6 deg measured).
     assert m["pelvis_height_error_m"]["max"] <= 0.05
     assert m["heading_error_deg"]["max"] <= 6.0
-    # The person stands on the left foot at the first sample: so does the robot's first tick,
-    # its right sole raised (s times the person's 14 cm: 10 cm), out of contact.
+    # The person stands on the left foot at the first sample, the right held out to the side:
+    # so does the robot's first tick, its right sole raised (7.7 cm), out of contact.
     assert traj.contacts[0].tolist() == [True, False]
     model = ctrl.robot.model
     data = model.createData()
