@@ -88,8 +88,15 @@ from ..robot import RobotModel, load_robot
 from ..solvers import make_solver
 from ..trajectory import RobotTrajectory
 from .anthropometry import anthropometric_offsets
+from .compiled import cloud_kernel, overlap, threads
 from .config import CloudConfig
-from .io import CloudFrame, CloudSequence, estimate_normals, prepare_cloud
+from .io import (
+    CloudFrame,
+    CloudSequence,
+    estimate_normals,
+    normals_in_background,
+    prepare_cloud,
+)
 from .neighbours import knn
 from .stability import (
     HipRuleState,
@@ -340,7 +347,32 @@ def _kdtree_sums(
     neighbors: int,
     pairs: np.ndarray | None,
 ) -> tuple[_Sums, np.ndarray]:
-    """E-step over each cloud point's ``neighbors`` nearest active template points or ``pairs``."""
+    """E-step over each cloud point's ``neighbors`` nearest active template points or ``pairs``.
+
+    With the compiled point-cloud kernel (:mod:`.compiled`) the posteriors and the sums run in
+    C++ in this code's order of operations: the same results to the bit.
+    """
+    ck = cloud_kernel()
+    if ck is not None:
+        if pairs is None:
+            d2c, nb = knn(A, B, min(neighbors, len(A)))
+            pairs = idx_act[nb]
+        else:
+            d2c = np.zeros((0, pairs.shape[1]))
+            pairs = np.ascontiguousarray(pairs, dtype=np.int64)
+        cols, s2, n2 = _cloud_terms(S, Sn if use_n else None)
+        logp, w, R = ck.estep(
+            np.ascontiguousarray(B, dtype=float),
+            np.ascontiguousarray(Afull, dtype=float),
+            pairs,
+            d2c,
+            sigma2,
+            *log_in_out,
+            cols,
+            Mtot,
+            threads(),
+        )
+        return _sums_from(logp, w, R, s2, n2, use_n), pairs
     # (k, N) layout below: the reductions over each point's k pairs run along rows.
     d2: np.ndarray | None = None
     if pairs is None:
@@ -360,17 +392,33 @@ def _kdtree_sums(
             d2 += diff
     d2 *= -0.5 / sigma2
     logp, post_t = _log_posteriors(d2, *log_in_out, axis=0)
-    nll = -float(logp.sum())
     w = post_t.sum(axis=0)
     post = np.ascontiguousarray(post_t.T)
     # P1, Px (and Pn) in one sparse product: P^T [1 S Sn] with P the (N, Mtot) posteriors.
     P = _posterior_matrix(pairs, post, Mtot)
     cols, s2, n2 = _cloud_terms(S, Sn if use_n else None)
     R = np.asarray(P.T @ cols)
+    return _sums_from(logp, w, R, s2, n2, use_n), pairs
+
+
+def _sums_from(
+    logp: np.ndarray,
+    w: np.ndarray,
+    R: np.ndarray,
+    s2: np.ndarray,
+    n2: np.ndarray | None,
+    use_n: bool,
+) -> _Sums:
+    """The E-step's sums (:data:`_Sums`) from its per-point and per-template-point parts.
+
+    ``logp``: log p(s_n) (N,); ``w``: each cloud point's posterior mass (N,); ``R``:
+    P^T [1 S Sn] (Mtot, 4 or 7).
+    """
+    nll = -float(logp.sum())
     P1, Px = R[:, 0], R[:, 1:4]
     Pn = R[:, 4:7] if use_n else None
     wN2 = float(w @ n2) if n2 is not None else 0.0
-    return (nll, P1, Px, Pn, float(w @ s2), wN2, float(w.sum())), pairs
+    return nll, P1, Px, Pn, float(w @ s2), wN2, float(w.sum())
 
 
 _CLOUD_TERMS: list[Any] = []
@@ -662,6 +710,9 @@ class CloudRetargeter:
                 path="em.reinit_yaw_starts",
             )
         self._contact_feet: tuple[str, ...] = ()
+        # The frame's cloud normals when computed in the background (_prepare, _take_normals).
+        self._normals_job: Callable[[], np.ndarray] | None = None
+        self._frame_normals: np.ndarray | None = None
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -746,8 +797,22 @@ class CloudRetargeter:
                 path="input.crop",
             )
         if Sn is None and self.config.em.refine_iterations > 0:
+            if self.calibrated and overlap():
+                # Only the refinement needs them: computed while the first stages run
+                # (_take_normals joins), the same normals.
+                self._normals_job = normals_in_background(S, self.sensor_position, inp.normals_k)
+                return S, None
             Sn = estimate_normals(S, self.sensor_position, inp.normals_k)
         return S, Sn
+
+    def _take_normals(self, Sn: np.ndarray | None) -> np.ndarray | None:
+        """The frame's cloud normals: ``Sn``, or the ones computed in the background."""
+        if Sn is not None:
+            return Sn
+        if self._normals_job is not None:
+            job, self._normals_job = self._normals_job, None
+            self._frame_normals = job()
+        return self._frame_normals
 
     def _pose(
         self, q: np.ndarray, *, jacobians: bool = True, normals: bool = True
@@ -1667,6 +1732,7 @@ class CloudRetargeter:
         t0 = time.perf_counter()
         em = self.config.em
         self._sub = None
+        self._normals_job, self._frame_normals = None, None
         S, Sn = self._prepare(frame, index)
         log: list[IterationLog] = []
         q_prev = self.history[-1] if self.history else None
@@ -1691,6 +1757,7 @@ class CloudRetargeter:
                 if not ok:
                     status = "relaxed"
         q, sigma2, nll = self._stages(S, Sn, q, sigma2, q_prev, frame, log, centres=True)
+        Sn = self._take_normals(Sn)
         if self._branches:
             q, sigma2, nll = self._switch_branches(S, Sn, (q, sigma2, nll), log)
         if self._lost(sigma2):
@@ -1786,6 +1853,8 @@ class CloudRetargeter:
             if self._centre_due(frame):
                 q, sigma2 = self._centre_stage(S, q, sigma2, q_prev, active, log, neighbours)
         nll = self.final_nll(S, q, sigma2, active, neighbours)
+        if refine and em.refine_iterations:
+            Sn = self._take_normals(Sn)
         if refine and em.refine_iterations and Sn is not None:
             q, sigma2, _ = self._em_stage(
                 tag + "refine", S, Sn, q, sigma2, q_prev, active, em.refine_iterations, log

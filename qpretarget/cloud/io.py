@@ -23,7 +23,8 @@ averages the points of each voxel and draws a fixed-size random subset.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, overload
@@ -265,6 +266,7 @@ def estimate_normals(points: np.ndarray, viewpoint: np.ndarray | None, k: int = 
 
     Without a viewpoint the normals face away from the cloud's centroid.
     """
+    from .compiled import cloud_kernel
     from .neighbours import knn
 
     n = len(points)
@@ -272,6 +274,10 @@ def estimate_normals(points: np.ndarray, viewpoint: np.ndarray | None, k: int = 
         return np.tile([0.0, 0.0, 1.0], (n, 1))
     k = int(min(k, n))
     _, idx = knn(points, points, k)
+    ck = cloud_kernel()
+    if ck is not None:  # the same sums in C++, in the order of the numpy code below
+        C = ck.scatter(np.ascontiguousarray(points, dtype=float), idx.astype(np.int64, copy=False))
+        return _facing(smallest_eigenvectors(C), points, viewpoint)
     # Scatter matrices entry by entry on (k, n) coordinate arrays, reduced along contiguous
     # rows (a (n, k, 3) gather, batched 3x3 products and reductions over many short rows are
     # slow in numpy).
@@ -282,7 +288,53 @@ def estimate_normals(points: np.ndarray, viewpoint: np.ndarray | None, k: int = 
     for a in range(3):
         for b in range(a, 3):
             C[:, a, b] = C[:, b, a] = (cs[a] * cs[b]).sum(axis=0)
-    nrm = smallest_eigenvectors(C)
+    return _facing(smallest_eigenvectors(C), points, viewpoint)
+
+
+def normals_in_background(
+    points: np.ndarray, viewpoint: np.ndarray | None, k: int = 10
+) -> Callable[[], np.ndarray]:
+    """:func:`estimate_normals` started on another thread; call the result to get them.
+
+    The search and the scatter matrices run in the compiled point-cloud kernel, which lets
+    Python's other threads run meanwhile (the fit's first stage does not need the normals), so
+    on a machine with a free core they cost the fit only the eigenvectors. The same normals to
+    the bit; without the compiled kernel (or with fewer than 3 points) they are computed now.
+    """
+    from .compiled import cloud_kernel
+    from .neighbours import knn
+
+    ck = cloud_kernel()
+    n = len(points)
+    if ck is None or n < 3:
+        out = estimate_normals(points, viewpoint, k)
+        return lambda: out
+    k = int(min(k, n))
+    pts = np.ascontiguousarray(points, dtype=float)
+    box: list[Any] = []
+
+    def work() -> None:
+        try:
+            _, idx = knn(pts, pts, k)
+            box.append(ck.scatter(pts, idx.astype(np.int64, copy=False)))
+        except BaseException as exc:  # re-raised by the caller
+            box.append(exc)
+
+    th = threading.Thread(target=work, name="qpretarget-normals", daemon=True)
+    th.start()
+
+    def get() -> np.ndarray:
+        th.join()
+        C = box[0]
+        if isinstance(C, BaseException):
+            raise C
+        return _facing(smallest_eigenvectors(C), pts, viewpoint)
+
+    return get
+
+
+def _facing(nrm: np.ndarray, points: np.ndarray, viewpoint: np.ndarray | None) -> np.ndarray:
+    """The normals ``nrm`` turned towards ``viewpoint`` (or away from the centroid)."""
     ref = (viewpoint - points) if viewpoint is not None else (points - points.mean(axis=0))
     nrm[np.einsum("na,na->n", nrm, ref) < 0] *= -1
     return nrm

@@ -1,12 +1,15 @@
 # SPDX-License-Identifier: Apache-2.0
 """Exact k-nearest-neighbour searches of the point-cloud fit (E-step pairs, cloud normals).
 
-One function, :func:`knn`, used by every search of :mod:`qpretarget.cloud`. It uses
-``pykdtree`` (a kd-tree in C) when that package is installed and scipy's ``cKDTree``
-otherwise; both are exact, so they return the same neighbours (up to ties between equal
-distances). On the fit's searches (2,500 cloud points, k = 8-10 of about 2,000 template
-points, 3-D and 6-D) pykdtree built and searched in about 0.7 of cKDTree's time
-(``scripts/bench_cloud.py --stages``; docs/point_clouds.md).
+One function, :func:`knn`, used by every search of :mod:`qpretarget.cloud`. It uses the
+compiled point-cloud kernel's kd-tree (:mod:`.compiled`, ``src/kernel/cloud.cpp``) when it is
+built, else ``pykdtree`` (a kd-tree in C) when that package is installed, else scipy's
+``cKDTree``; all are exact, so they return the same neighbours (up to ties between equal
+distances), and the compiled one and pykdtree the same squared distances to the bit. On the
+fit's searches (2,500 cloud points, k = 8-10 of about 2,000 template points, 3-D and 6-D)
+pykdtree built and searched in about 0.7 of cKDTree's time, the compiled one in about 0.9 of
+pykdtree's on one thread and 0.6 on two (``scripts/bench_cloud.py --stages``;
+docs/point_clouds.md).
 """
 
 from __future__ import annotations
@@ -17,19 +20,26 @@ from typing import Any
 
 import numpy as np
 
+from .compiled import cloud_kernel, threads
+
 _PyKDTree: Any
 try:  # optional: a faster exact kd-tree (imported by name: type-checks with or without it)
     _PyKDTree = importlib.import_module("pykdtree.kdtree").KDTree
 except ImportError:  # pragma: no cover - depends on the environment
     _PyKDTree = None
 
-#: Search backend: ``pykdtree`` when installed, else ``scipy``. The environment variable
-#: ``QPRETARGET_KNN=scipy`` forces scipy's (for comparisons).
-BACKEND = (
-    "pykdtree"
-    if _PyKDTree is not None and os.environ.get("QPRETARGET_KNN", "") != "scipy"
-    else "scipy"
-)
+_FORCED = os.environ.get("QPRETARGET_KNN", "").strip().lower()
+#: Search backend without the compiled kernel: ``pykdtree`` when installed, else ``scipy``.
+#: The environment variable ``QPRETARGET_KNN=scipy`` (or ``pykdtree``) forces that one, also
+#: over the compiled kernel (for comparisons).
+BACKEND = "pykdtree" if _PyKDTree is not None and _FORCED != "scipy" else "scipy"
+
+
+def backend() -> str:
+    """The search in use: ``compiled``, ``pykdtree`` or ``scipy``."""
+    if _FORCED not in ("scipy", "pykdtree") and cloud_kernel() is not None:
+        return "compiled"
+    return BACKEND
 
 
 def knn(data: np.ndarray, query: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -49,6 +59,10 @@ def knn(data: np.ndarray, query: np.ndarray, k: int) -> tuple[np.ndarray, np.nda
     k = int(k)
     if not 1 <= k <= len(data):
         raise ValueError(f"k = {k} neighbours asked of {len(data)} points")
+    ck = cloud_kernel() if _FORCED not in ("scipy", "pykdtree") else None
+    if ck is not None:
+        d2c, idxc = ck.knn(data, query, k, threads())
+        return d2c, idxc
     if BACKEND == "pykdtree":
         d2, idx = _PyKDTree(data).query(query, k=k, sqr_dists=True)
         idx = idx.astype(np.intp, copy=False)
@@ -64,4 +78,4 @@ def knn(data: np.ndarray, query: np.ndarray, k: int) -> tuple[np.ndarray, np.nda
     return np.asarray(d2, float), np.asarray(idx, np.intp)
 
 
-__all__ = ["BACKEND", "knn"]
+__all__ = ["BACKEND", "backend", "knn"]
