@@ -302,7 +302,6 @@ def normals_in_background(
     the bit; without the compiled kernel (or with fewer than 3 points) they are computed now.
     """
     from .compiled import cloud_kernel
-    from .neighbours import knn
 
     ck = cloud_kernel()
     n = len(points)
@@ -315,7 +314,7 @@ def normals_in_background(
 
     def work() -> None:
         try:
-            _, idx = knn(pts, pts, k)
+            _, idx = ck.knn(pts, pts, k, 1)  # .neighbours.knn's search, on this thread alone
             box.append(ck.scatter(pts, idx.astype(np.int64, copy=False)))
         except BaseException as exc:  # re-raised by the caller
             box.append(exc)

@@ -25,10 +25,12 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <functional>
 #include <mutex>
 #include <cmath>
+#include <cstdio>
 #include <cstdint>
 #include <limits>
 #include <stdexcept>
@@ -54,21 +56,36 @@ nb::capsule owner_of(T *p) {
 // ------------------------------------------------------------------------------------ threads
 // Helper threads kept between calls. A job is split in chunks handed out one at a time; the
 // calling thread works through them too and then waits only for the helpers that took part (a
-// helper that did not get a core before the chunks ran out, e.g. on a loaded machine, is not
-// waited for). Every chunk is computed the same way whichever thread runs it.
+// helper that did not get a core before the chunks ran out is not waited for). Every chunk is
+// computed the same way whichever thread runs it. On a loaded machine a helper that took a chunk
+// can lose its core, and the caller then waits for it: when a job's helpers took part in none of
+// it or kept the caller waiting for more than a tenth of the job, the next BACKOFF jobs run on
+// the calling thread alone (then helpers are tried again); and no helper is woken while every
+// core is running a thread (free_core).
 class Pool {
  public:
+  static constexpr int BACKOFF = 32;
+
   // Run fn(chunk) for chunk in [0, chunks) on the caller and up to `helpers` helper threads.
   template <class F>
   void run(int chunks, int helpers, F &&fn) {
     helpers = std::min(helpers, chunks - 1);
+    // One job at a time: a job started while another thread's runs gets no helpers.
+    std::unique_lock<std::mutex> one(serial_, std::try_to_lock);
+    if (!one.owns_lock()) helpers = 0;
+    if (helpers > 0 && skip_ > 0) {
+      --skip_;
+      helpers = 0;
+    }
+    if (helpers > 0 && !free_core()) helpers = 0;
     if (helpers <= 0) {
+      if (one.owns_lock()) one.unlock();
       for (int c = 0; c < chunks; ++c) fn(c);
       return;
     }
-    std::lock_guard<std::mutex> one(serial_);  // one job at a time
     ensure(helpers);
     Job job{[&fn](int c) { fn(c); }, chunks};
+    auto t0 = std::chrono::steady_clock::now();
     {
       std::lock_guard<std::mutex> lk(m_);
       job_ = &job;
@@ -77,11 +94,16 @@ class Pool {
       open_.store(true);
     }
     cv_.notify_all();
-    work(job);
+    int mine = work(job);
     open_.store(false);
+    auto t1 = std::chrono::steady_clock::now();
     while (running_.load() > 0) std::this_thread::yield();
-    std::lock_guard<std::mutex> lk(m_);
-    job_ = nullptr;
+    auto t2 = std::chrono::steady_clock::now();
+    {
+      std::lock_guard<std::mutex> lk(m_);
+      job_ = nullptr;
+    }
+    if (mine == chunks || (t2 - t1) * 10 > (t1 - t0)) skip_ = BACKOFF;
   }
 
   ~Pool() {
@@ -99,8 +121,28 @@ class Pool {
     int chunks;
     std::atomic<int> next{0};
   };
-  static void work(Job &job) {
-    for (int c; (c = job.next.fetch_add(1)) < job.chunks;) job.fn(c);
+  // Whether a core is free for a helper: fewer threads running now (/proc/loadavg's fourth
+  // field, this one included) than cores. Read at most once a millisecond; true where the file
+  // does not exist.
+  bool free_core() {
+    auto now = std::chrono::steady_clock::now();
+    if (now - checked_ < std::chrono::milliseconds(1)) return free_;
+    checked_ = now;
+    free_ = true;
+    if (FILE *f = std::fopen("/proc/loadavg", "r")) {
+      double l1, l5, l15;
+      int running = 0, total = 0;
+      if (std::fscanf(f, "%lf %lf %lf %d/%d", &l1, &l5, &l15, &running, &total) == 5)
+        free_ = running < int(std::max(1u, std::thread::hardware_concurrency()));
+      std::fclose(f);
+    }
+    return free_;
+  }
+
+  static int work(Job &job) {  // the chunks done by this thread
+    int done = 0;
+    for (int c; (c = job.next.fetch_add(1)) < job.chunks; ++done) job.fn(c);
+    return done;
   }
   void ensure(int n) {
     while (int(threads_.size()) < n) {
@@ -118,8 +160,9 @@ class Pool {
         if (stop_) return;
         seen = gen_;
         if (me >= wanted_) continue;
+        if (!open_.load()) continue;  // the job is over already
         job = job_;
-        running_.fetch_add(1);  // before reading open_: run() waits for this helper if open
+        running_.fetch_add(1);  // before reading open_ again: run() waits for this helper if open
       }
       if (job && open_.load()) work(*job);
       running_.fetch_sub(1);
@@ -130,6 +173,9 @@ class Pool {
   std::vector<std::thread> threads_;
   Job *job_ = nullptr;
   int wanted_ = 0;
+  int skip_ = 0;  // jobs left to run on the calling thread alone (backoff)
+  bool free_ = true;
+  std::chrono::steady_clock::time_point checked_{};
   uint64_t gen_ = 0;
   bool stop_ = false;
   std::atomic<bool> open_{false};
