@@ -21,7 +21,7 @@ import pytest
 import qpretarget.cloud.compiled as compiled
 import qpretarget.cloud.neighbours as nn
 from qpretarget.cloud.em import CloudRetargeter, e_step
-from qpretarget.cloud.io import estimate_normals
+from qpretarget.cloud.io import estimate_normals, normals_in_background
 
 
 @pytest.fixture()
@@ -88,6 +88,23 @@ def test_compiled_e_step_equals_numpy(ck, normals: bool, mu: float) -> None:
         assert math.isfinite(a.nll)
 
 
+def test_compiled_e_step_does_not_depend_on_the_threads(ck) -> None:
+    rng = np.random.default_rng(9)
+    S, V = _surface(rng, 2500), _surface(rng, 2000)
+    d2, nb = ck.knn(V, S, 8, 1)
+    cols = np.hstack([np.ones((len(S), 1)), S])
+    args = (1.1e-4, -7.2, -10.1, cols, len(V))
+    one = ck.estep(S, V, nb, d2, *args, 1)
+    # 2 and 3 threads; and the distances from the pairs (kept pairs) instead of the search's.
+    for other in (
+        ck.estep(S, V, nb, d2, *args, 2),
+        ck.estep(S, V, nb, d2, *args, 3),
+        ck.estep(S, V, nb, np.zeros((0, 8)), *args, 2),
+    ):
+        for a, b in zip(one, other, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
 def test_compiled_normals_equal_numpy(ck) -> None:
     pts = _surface(np.random.default_rng(6), 2500)
     eye = np.array([2.0, 0.3, 1.1])
@@ -95,6 +112,19 @@ def test_compiled_normals_equal_numpy(ck) -> None:
     with compiled.python_only():
         m = estimate_normals(pts, eye, 10)
     np.testing.assert_array_equal(n, m)
+
+
+def test_normals_in_the_background_equal_the_normals(ck) -> None:
+    """The overlapped normals (their search and scatter on another thread) are the same."""
+    pts = _surface(np.random.default_rng(8), 2500)
+    eye = np.array([2.0, 0.3, 1.1])
+    np.testing.assert_array_equal(
+        normals_in_background(pts, eye, 10)(), estimate_normals(pts, eye, 10)
+    )
+    with compiled.python_only():  # no compiled kernel: computed at once, the numpy way
+        np.testing.assert_array_equal(
+            normals_in_background(pts, eye, 10)(), estimate_normals(pts, eye, 10)
+        )
 
 
 def test_a_fit_is_the_same_with_and_without_the_compiled_kernel(ck, g1, g1_template, g1_sequence):
