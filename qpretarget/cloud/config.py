@@ -265,6 +265,10 @@ class StabilityConfig:
         release_height: a supporting sole stops supporting above this height [m].
         flight_height: lowest sole above this height: no support (flight) [m].
         hip_joints: joints of the paper's rule (default: ``*hip*pitch*``, ``*hip*roll*``).
+        plant: how the command stands its primary sole flat on the floor: ``leg`` (the
+            supporting leg's joints put it there under the fitted trunk, which keeps its
+            orientation; ``CloudRetargeter.robot_configuration``) or ``rigid`` (the whole
+            fitted body turned and moved with the sole).
     """
 
     mode: str = "qp"
@@ -274,6 +278,7 @@ class StabilityConfig:
     release_height: float = 0.07
     flight_height: float = 0.25
     hip_joints: list[str] | None = None
+    plant: str = "leg"
 
 
 TOP_KEYS = (
@@ -298,6 +303,7 @@ _CHOICES = {
     ("em", "temporal_reference"): ("previous", "prediction"),
     ("stability", "mode"): ("qp", "hip_offset", "none"),
     ("stability", "region"): ("polygon", "inscribed_circle"),
+    ("stability", "plant"): ("leg", "rigid"),
 }
 
 
