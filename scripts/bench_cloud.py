@@ -11,9 +11,10 @@ timers around those functions, which add about 1 ms per frame; the 3-D searches 
 cloud normals' own). The k-nearest-neighbour searches and the E-step's sums use the compiled
 point-cloud kernel when it is built (``versions.knn``, ``versions.cloud_kernel``; src/kernel/
 cloud.cpp), else pykdtree when it is installed; ``QPRETARGET_KNN=scipy`` (or ``pykdtree``)
-forces that search, ``QPRETARGET_CLOUD_KERNEL=0`` the numpy code throughout. The compiled kernel
-uses 2 threads (``QPRETARGET_CLOUD_THREADS=1``: one) and computes a frame's cloud normals on
-a second thread while its first stages run (``QPRETARGET_CLOUD_OVERLAP=0``: not), so
+forces that search, ``QPRETARGET_CLOUD_KERNEL=0`` the numpy code throughout. With the compiled
+kernel a frame's cloud normals are computed on a second thread while its first stages run
+(``QPRETARGET_CLOUD_OVERLAP=0``: not; ``QPRETARGET_CLOUD_THREADS=2``: the searches and
+posteriors on 2 threads as well), so
 ``cpu_ms_*`` (the fitting thread's CPU time) can be below the wall time's figures; the
 ``process_cpu_ms_*`` count every thread.
 

@@ -8,7 +8,7 @@ the numpy code's order of operations, so that the fit is the same to the bit wit
 (``tests/cloud/test_compiled.py``). Optional: without it (no C++ compiler at install, or
 ``QPRETARGET_CLOUD_KERNEL=0``) the numpy code runs.
 
-``QPRETARGET_CLOUD_THREADS`` (default 2; 1 on a single core) sets the threads of the
+``QPRETARGET_CLOUD_THREADS`` (default 1) sets the threads of the
 k-nearest-neighbour searches and of the E-step's posteriors (each cloud point's are
 independent, and the sums over them are taken in one order: the same results with any number
 of threads). A helper thread that gets no core (a loaded machine) is not waited for: its
@@ -70,11 +70,12 @@ def why_not() -> str:
 
 
 def threads() -> int:
-    """Threads of the compiled searches and E-steps (``QPRETARGET_CLOUD_THREADS``).
+    """Threads of the compiled searches and E-steps (``QPRETARGET_CLOUD_THREADS``, default 1).
 
-    By default 2 (1 on a single core).
+    On the 2-core AMD EPYC VM 2 threads saved about 1 ms a frame idle and cost 2-3 ms while
+    another job held the other core (docs/point_clouds.md), hence 1.
     """
-    default = min(2, os.cpu_count() or 1)
+    default = 1
     try:
         return max(1, int(os.environ.get("QPRETARGET_CLOUD_THREADS", str(default))))
     except ValueError:
@@ -96,7 +97,9 @@ def describe() -> str:
     """One line for bench reports: is the compiled point-cloud kernel in use, or why not."""
     if cloud_kernel() is None:
         return f"off ({why_not()})"
-    return f"on ({threads()} threads, normals overlapped: {'yes' if overlap() else 'no'})"
+    n = threads()
+    overlapped = "yes" if overlap() else "no"
+    return f"on ({n} thread{'s' if n > 1 else ''}, normals overlapped: {overlapped})"
 
 
 @contextlib.contextmanager
