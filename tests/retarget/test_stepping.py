@@ -656,10 +656,15 @@ def test_rising_on_the_toes_to_reach_up_rolls_the_soles_with_their_contacts():
     assert m["held_ticks"] == 0
 
 
-# Excerpts: a walk's first steps; a jump's two-foot push-off on the toes (tiptoe) into flight.
+# Excerpts: a walk's first steps; a jump's two-foot push-off on the toes (tiptoe) into flight;
+# a run that starts on one foot (the initial stance with the other raised).
 @pytest.mark.parametrize(
     "clip, start, end",
-    [("cmu_16_33_walk_stop.bvh", 0.0, 1.4), ("cgspeed_cmu_01_01_playground_jumps.bvh", 12.0, 13.2)],
+    [
+        ("cmu_16_33_walk_stop.bvh", 0.0, 1.4),
+        ("cgspeed_cmu_01_01_playground_jumps.bvh", 12.0, 13.2),
+        ("cmu_49_18_one_leg_balance.bvh", 0.0, 1.0),
+    ],
 )
 def test_online_push_equals_offline_causal_with_contacts_switching(clip, start, end):
     ctrl = Controller.from_yaml(CONFIG)
