@@ -149,6 +149,7 @@ def test_the_numpy_code_runs_without_the_module(monkeypatch: pytest.MonkeyPatch)
             raise ImportError("No module named 'qpretarget._cloud'")
         return real(name, *a, **k)
 
+    monkeypatch.delenv("QPRETARGET_CLOUD_KERNEL", raising=False)
     monkeypatch.setattr(compiled, "_MODULE", None)
     monkeypatch.setattr(compiled, "_WHY_NOT", "")
     monkeypatch.setattr(importlib, "import_module", no_cloud)
