@@ -738,6 +738,8 @@ class CloudRetargeter:
         #: Supporting feet other than the primary -> their sole placement, held while they
         #: support (``stability.plant: leg``).
         self._held: dict[str, pin.SE3] = {}
+        #: foot -> (sole frame, leg's configuration and velocity indices): :meth:`_leg`.
+        self._legs: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
         self._anchors: dict[str, tuple[np.ndarray, float]] = {}
         self._centre_time: float | None = None  # time of the last frame with a centre stage
         self._sub: np.ndarray | None = None  # the frame's visible template points (_pose)
@@ -1770,11 +1772,7 @@ class CloudRetargeter:
         ``q_fit`` and only the leg's joints move (the nearest pose within their limits).
         """
         model, rdata = self.robot.model, self._robot_data
-        fid = self.robot.frame_id(self.robot.feet[foot].frame)
-        joint = model.frames[fid].parentJoint
-        chain = [j for j in model.supports[joint] if j > 1 and model.joints[j].nv == 1]
-        iq = np.array([model.joints[j].idx_q for j in chain], dtype=int)
-        iv = np.array([model.joints[j].idx_v for j in chain], dtype=int)
+        fid, iq, iv = self._leg(foot)
         lo, hi = self.robot.q_min[iq], self.robot.q_max[iq]
         q = q_fit.copy()
         if position is not None:
@@ -1788,7 +1786,26 @@ class CloudRetargeter:
                 break
             J = pin.computeFrameJacobian(model, rdata, q, fid, pin.ReferenceFrame.LOCAL)[:, iv]
             q[iq] += np.linalg.lstsq(J, e, rcond=None)[0]
-        return self._plant_bounded(q_fit, position, fid, iq, target)
+        return self._plant_bounded(q_fit, position, fid, iq, iv, target)
+
+    def _leg(self, foot: str) -> tuple[int, np.ndarray, np.ndarray]:
+        """The sole frame of ``foot`` and its leg's one-DoF joints, computed once per foot.
+
+        Returns ``(frame id, configuration indices, velocity indices)``, the base excluded.
+        """
+        leg = self._legs.get(foot)
+        if leg is None:
+            model = self.robot.model
+            fid = self.robot.frame_id(self.robot.feet[foot].frame)
+            chain = [
+                j
+                for j in model.supports[model.frames[fid].parentJoint]
+                if j > 1 and model.joints[j].nv == 1
+            ]
+            iq = np.array([model.joints[j].idx_q for j in chain], dtype=int)
+            iv = np.array([model.joints[j].idx_v for j in chain], dtype=int)
+            leg = self._legs[foot] = (fid, iq, iv)
+        return leg
 
     def _hold_others(self, q: np.ndarray, support: Support, primary: str) -> np.ndarray:
         """The other supporting soles held where they were put down, by their legs' joints.
@@ -1805,10 +1822,9 @@ class CloudRetargeter:
             if f not in others:
                 del self._held[f]
         for f in others:
-            fid = self.robot.frame_id(self.robot.feet[f].frame)
             if f not in self._held:
-                pin.framesForwardKinematics(model, rdata, q)
-                self._held[f] = rdata.oMf[fid].copy()
+                pin.forwardKinematics(model, rdata, q)
+                self._held[f] = pin.updateFramePlacement(model, rdata, self._leg(f)[0]).copy()
                 continue
             q = self._plant_leg(q, None, f, self._held[f])
         return q
@@ -1819,6 +1835,7 @@ class CloudRetargeter:
         position: np.ndarray | None,
         fid: int,
         iq: np.ndarray,
+        iv: np.ndarray,
         target: pin.SE3,
     ) -> np.ndarray:
         r"""The bounded least-squares compromise of :meth:`_plant_leg` (projected LM).
@@ -1833,10 +1850,6 @@ class CloudRetargeter:
         """
         model, rdata = self.robot.model, self._robot_data
         lo, hi = self.robot.q_min[iq], self.robot.q_max[iq]
-        joint = model.frames[fid].parentJoint
-        iv = np.array(
-            [model.joints[j].idx_v for j in model.supports[joint] if j > 1], dtype=int
-        )
         base = position is not None
         cols = np.r_[np.arange(6), iv] if base else iv
         q0 = q_fit.copy()
@@ -2027,6 +2040,30 @@ class CloudRetargeter:
             )
         return q, sigma2, nll
 
+    def _trial(
+        self,
+        S: np.ndarray,
+        Sn: np.ndarray | None,
+        q0: np.ndarray,
+        q_prev: np.ndarray | None,
+        log: list[IterationLog],
+        tag: str,
+        *,
+        sigma2: float | None = None,
+        iterations: int | None = None,
+        refine: bool = True,
+    ) -> tuple[np.ndarray, float, float]:
+        """:meth:`_stages` of a candidate start (re-initialisation, shoulder branches).
+
+        No centre stage; from ``em.sigma2_init`` unless ``sigma2`` is given; the iterations go
+        to ``log`` under ``tag``.
+        """
+        s2 = self.config.em.sigma2_init if sigma2 is None else sigma2
+        return self._stages(
+            S, Sn, q0, s2, q_prev, None, log, centres=False, tag=tag,
+            iterations=iterations, refine=refine,
+        )  # fmt: skip
+
     def _lost(self, sigma2: float) -> bool:
         """Whether the frame's fit looks lost: sigma above ``em.reinit_ratio`` times the median."""
         em = self.config.em
@@ -2051,7 +2088,6 @@ class CloudRetargeter:
         ``em.reinit_yaw_starts``, the coarse search over the trunk's yaw (:meth:`_yaw_search`)
         competes too; when it wins, the pose history restarts from its fit.
         """
-        em = self.config.em
         starts = []
         if self._good is not None:
             starts.append(("reinit-last-", self._good))
@@ -2066,11 +2102,7 @@ class CloudRetargeter:
         best = fit
         for tag, start in starts:
             q0, q_prev = self._reinit_start(start)
-            trial_log: list[IterationLog] = []
-            cand = self._stages(
-                S, Sn, q0, em.sigma2_init, q_prev, None, trial_log, centres=False, tag=tag
-            )
-            log.extend(trial_log)
+            cand = self._trial(S, Sn, q0, q_prev, log, tag)
             if cand[2] < best[2]:
                 best = cand
         yaw = self._yaw_search(S, Sn, log)
@@ -2151,32 +2183,15 @@ class CloudRetargeter:
         for psi, start in self.yaw_starts(self._good):
             q0, q_prev = self._reinit_start(start)
             tag = f"reinit-yaw{math.degrees(psi):+.0f}-"
-            trial_log: list[IterationLog] = []
-            q, sigma2, nll = self._stages(
-                S,
-                Sn,
-                q0,
-                em.sigma2_init,
-                q_prev,
-                None,
-                trial_log,
-                centres=False,
-                tag=tag,
-                iterations=em.reinit_yaw_iterations,
-                refine=False,
+            q, sigma2, nll = self._trial(
+                S, Sn, q0, q_prev, log, tag, iterations=em.reinit_yaw_iterations, refine=False
             )
-            log.extend(trial_log)
             if best is None or nll < best[2]:
                 best = (q, sigma2, nll, q_prev, tag)
         if best is None:
             return None
         q, sigma2, _, q_prev, tag = best
-        trial_log = []
-        fit = self._stages(
-            S, Sn, q, sigma2, q_prev, None, trial_log, centres=False, tag=f"{tag}full-"
-        )
-        log.extend(trial_log)
-        return fit
+        return self._trial(S, Sn, q, q_prev, log, f"{tag}full-", sigma2=sigma2)
 
     def _branch_triples(self, spec: list[list[str]]) -> list[np.ndarray]:
         r"""Configuration indices (3,) of each ``em.branch_joints`` triple, checked.
@@ -2292,19 +2307,7 @@ class CloudRetargeter:
             if self.stability_mode == "qp":
                 q0, _ = self._restore_balance(q0)
             q_prev = q0.copy() if em.temporal_reference == "prediction" else self.history[-1]
-            trial_log: list[IterationLog] = []
-            cand = self._stages(
-                S,
-                Sn,
-                q0,
-                em.sigma2_init,
-                q_prev,
-                None,
-                trial_log,
-                centres=False,
-                tag=f"branch{k}-",
-            )
-            log.extend(trial_log)
+            cand = self._trial(S, Sn, q0, q_prev, log, f"branch{k}-")
             if cand[2] < best[2]:
                 best = cand
                 # Newest first, each wrapped next to the newer one: a continuous history.
