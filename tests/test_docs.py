@@ -284,6 +284,9 @@ CHANGES: dict[tuple[str, str, str], tuple[dict[str, Any], Any]] = {
     ("constraints", "contacts", "gain"): ({}, 5.0),
     ("constraints", "contacts", "second_order"): ({}, False),
     ("constraints", "contacts", "max_correction"): ({}, [1e-4, 1e-4]),
+    ("constraints", "contacts", "refine"): ({}, False),
+    ("constraints", "contacts", "refine_tolerance"): ({}, 1e-2),
+    ("constraints", "contacts", "refine_iterations"): ({}, 1),
     ("constraints", "support_polygon", "margin"): ({}, 0.02),
     ("constraints", "support_polygon", "gain"): ({}, 0.9),
     # A recovery the box can follow (0.084 asked for more: at capacity both depths gave the

@@ -165,6 +165,26 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
         """Box bounds ``(lb, ub)`` on ``v`` (nv,), or ``None`` if the module has none."""
         return None
 
+    def refines(self) -> bool:
+        """Whether :meth:`refine_rows` may correct this module's rows after a solve."""
+        return False
+
+    def refine_rows(
+        self, state: RobotState, q_next: np.ndarray, dt: float, l: np.ndarray, u: np.ndarray
+    ) -> bool:
+        r"""Correct this tick's rows for what the solved step really does (a corrector step).
+
+        The rows are linear in :math:`v`; integrating :math:`q \oplus v\,dt` is not. Given
+        the configuration ``q_next`` the solved velocity reaches, a module may shift its rows'
+        bounds ``l``, ``u`` (views of its own rows, changed in place) by the part of the
+        step its rows did not predict; the level then solves the tick again with them
+        (``control/velocity.py``). Default: nothing to correct.
+
+        Returns:
+            ``True`` when the bounds changed (the level solves again).
+        """
+        return False
+
     def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock | None:
         """``n_rows`` rows ``l <= C v <= u``, or ``None`` if the module has none."""
         return None

@@ -38,6 +38,12 @@ so a pivot is followed at its own rate (with the caps alone a 400 deg/s pivot wa
 the angular cap), while the residual error is still corrected gently. Without a step
 (:math:`\delta_f = 0`) this is the row above.
 
+The anticipation uses the last tick's velocity. With ``refine`` (default) a *corrector step*
+follows the solve (:meth:`Contacts.refine_rows`, run by the velocity level): the pose the
+solved velocity reaches at :math:`q \oplus v\,dt` is compared with the pose the rows asked for,
+and when they differ by more than ``refine_tolerance`` the rows are shifted by the difference
+and the tick is solved again (docs/contacts_balance.md).
+
 The block always has ``6 * n_feet`` rows; an inactive foot's rows are zero with infinite bounds, so
 switching contacts never changes the QP's shape.
 """
@@ -102,6 +108,11 @@ class Contacts(Constraint):
             tick (:math:`K = 1/dt`). :math:`K\,dt` is capped at 1.
         second_order: anticipate the second-order drift of the tick (module docstring).
         max_correction: caps of the drift-correction speed ``[linear m/s, angular rad/s]``.
+        refine: after a solve, correct the rows for the solved step's own drift and solve
+            again (:meth:`refine_rows`), at most ``refine_iterations`` times a tick.
+        refine_tolerance: residual that triggers it [m] (a rotation's times the sole's
+            half-length).
+        refine_iterations: most extra solves a tick.
         name: constraint name.
 
     Raises:
@@ -119,9 +130,19 @@ class Contacts(Constraint):
         gain: float | None = None,
         second_order: bool = True,
         max_correction: Sequence[float] = (0.5, 2.0),
+        refine: bool = True,
+        refine_tolerance: float = 5e-5,
+        refine_iterations: int = 2,
         name: str | None = None,
     ) -> None:
         super().__init__(name)
+        self.refine = check_bool(refine, "refine")
+        self.refine_tolerance = positive_float(refine_tolerance, "refine_tolerance [m]")
+        self.refine_iterations = int(refine_iterations)
+        if self.refine_iterations < 1 or self.refine_iterations != refine_iterations:
+            raise ConfigError(
+                f"refine_iterations must be a whole number >= 1, got {refine_iterations!r}."
+            )
         self.second_order = check_bool(second_order, "second_order")
         if (
             isinstance(max_correction, str)
@@ -232,6 +253,9 @@ class Contacts(Constraint):
         self._C = np.zeros((self.n_rows, robot.nv))
         self._l = np.full(self.n_rows, -np.inf)
         self._u = np.full(self.n_rows, np.inf)
+        self._refine_data = robot.model.createData()
+        lengths = [0.5 * (r[1] - r[0]) for r in self.rectangles if r is not None]
+        self._half_length = max(lengths) if lengths else 0.1
 
     def _check_names(self, feet: Sequence[str], path: str) -> np.ndarray:
         if isinstance(feet, str) or not isinstance(feet, Sequence):
@@ -381,6 +405,37 @@ class Contacts(Constraint):
         )  # fmt: skip
         return True
 
+    def _target_velocity(self, i: int, M: pin.SE3, k: float, dt: float) -> np.ndarray:
+        """The sole's velocity over the tick that contact ``i``'s rows ask for.
+
+        Before the second-order anticipation: the capped drift correction plus a moving
+        anchor's step (module docstring).
+        """
+        cap_lin, cap_ang = self.max_correction
+        R = M.rotation
+        step = self._anchor_step[i]
+        moving = bool(step.any())
+        lin = self._anchor_p[i] - M.translation
+        ang = R @ pin.log3(R.T @ self._anchor_R[i])
+        if moving:
+            lin = lin - step[:3]
+            ang = ang - step[3:]
+        lin *= k
+        ang *= k
+        n2 = lin.dot(lin)
+        if n2 > cap_lin * cap_lin:
+            lin *= cap_lin / np.sqrt(n2)
+        n2 = ang.dot(ang)
+        if n2 > cap_ang * cap_ang:
+            ang *= cap_ang / np.sqrt(n2)
+        if moving:
+            lin += step[:3] / dt
+            ang += step[3:] / dt
+        out = np.empty(6)
+        out[:3] = lin
+        out[3:] = ang
+        return out
+
     def compute_rows(self, state: RobotState, dt: float) -> ConstraintBlock:
         k = 1.0 / dt if self.gain is None else min(self.gain, 1.0 / dt)
         C, lo, hi = self._C, self._l, self._u
@@ -390,7 +445,6 @@ class Contacts(Constraint):
             model = state.model
             data2 = velocity_kinematics(state)
             half_dt = 0.5 * dt
-        cap_lin2, cap_ang2 = self.max_correction[0] ** 2, self.max_correction[1] ** 2
         for i, fid in enumerate(self.frame_ids):
             r0 = 6 * i
             if not active[i]:
@@ -398,35 +452,64 @@ class Contacts(Constraint):
                 lo[r0 : r0 + 6] = -np.inf
                 hi[r0 : r0 + 6] = np.inf
                 continue
-            M = state.frame_placement(fid)
-            R = M.rotation
             C[r0 : r0 + 6] = state.frame_jacobian(fid)
-            step = self._anchor_step[i]
-            moving = bool(step.any())
-            lin = self._anchor_p[i] - M.translation
-            ang = R @ pin.log3(R.T @ self._anchor_R[i])
-            if moving:
-                lin = lin - step[:3]
-                ang = ang - step[3:]
-            lin *= k
-            ang *= k
-            n2 = lin.dot(lin)
-            if n2 > cap_lin2:
-                lin *= self.max_correction[0] / np.sqrt(n2)
-            n2 = ang.dot(ang)
-            if n2 > cap_ang2:
-                ang *= self.max_correction[1] / np.sqrt(n2)
-            if moving:
-                lin += step[:3] / dt
-                ang += step[3:] / dt
-            lo[r0 : r0 + 3] = lin
-            lo[r0 + 3 : r0 + 6] = ang
+            lo[r0 : r0 + 6] = self._target_velocity(i, state.frame_placement(fid), k, dt)
             if drift:
                 acc = pin.getFrameClassicalAcceleration(model, data2, fid, LWA).vector
                 acc *= half_dt
                 lo[r0 : r0 + 6] -= acc
             hi[r0 : r0 + 6] = lo[r0 : r0 + 6]
         return ConstraintBlock(self.name, C, lo, hi)
+
+    def refines(self) -> bool:
+        return self.refine and bool(self._active.any())
+
+    def refine_rows(
+        self, state: RobotState, q_next: np.ndarray, dt: float, l: np.ndarray, u: np.ndarray
+    ) -> bool:
+        r"""The corrector step of the contact rows (:meth:`Constraint.refine_rows`).
+
+        For every active contact, the pose the rows ask for at the end of the tick is
+        :math:`p^* = p + b_{lin} dt`, :math:`R^* = \exp(b_{ang} dt) R` (:math:`b` the
+        correction and a moving anchor's step, module docstring); the solved step reaches
+        :math:`(p^+, R^+)` at ``q_next``. When the residual
+        :math:`r = [p^+ - p^*;\ \log_3(R^+ R^{*\top})]` exceeds :attr:`refine_tolerance`
+        (linear [m]; angular [rad] times the sole's half-length), the rows' right-hand side
+        becomes :math:`b - r/dt`: the next solve's step, whose drift is close to this one's,
+        lands on :math:`p^*` (a fixed-point iteration on the rows' nonlinearity, exact where
+        the second-order anticipation from the last tick's velocity is not).
+        """
+        if not self.refine:
+            return False
+        active = np.flatnonzero(self._active)
+        if not active.size:
+            return False
+        model, data = state.model, self._refine_data
+        pin.forwardKinematics(model, data, q_next)
+        k = 1.0 / dt if self.gain is None else min(self.gain, 1.0 / dt)
+        tol_lin, tol_ang = self.refine_tolerance, self.refine_tolerance / self._half_length
+        worst = 0.0
+        res = np.zeros((len(self.frame_ids), 6))
+        for i in active.tolist():
+            fid = self.frame_ids[i]
+            M = state.frame_placement(fid)
+            b = self._target_velocity(int(i), M, k, dt)
+            Mn = pin.updateFramePlacement(model, data, fid)
+            res[i, :3] = Mn.translation - (M.translation + b[:3] * dt)
+            R_star = pin.exp3(b[3:] * dt) @ M.rotation
+            res[i, 3:] = pin.log3(Mn.rotation @ R_star.T)
+            worst = max(
+                worst,
+                float(np.abs(res[i, :3]).max()) / tol_lin,
+                float(np.abs(res[i, 3:]).max()) / tol_ang,
+            )
+        if worst <= 1.0:
+            return False
+        for i in active.tolist():
+            r0 = 6 * int(i)
+            l[r0 : r0 + 6] -= res[i] / dt
+            u[r0 : r0 + 6] = l[r0 : r0 + 6]
+        return True
 
     def __repr__(self) -> str:
         return (

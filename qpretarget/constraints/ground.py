@@ -66,9 +66,10 @@ class Ground(DistanceDamper):
             height, :math:`\sqrt{2\varepsilon / (r\,|n \times a|)}` for an axis :math:`a` and
             the plane's normal :math:`n`, instead of :math:`\sqrt{2\varepsilon / r}` (a turn
             about the vertical is then free; see
-            :meth:`~.self_collision.DistanceDamper.compute_bounds`). Off by default: on G1 it
-            lets the legs turn faster than the contact rows hold a stance foot (measured in
-            docs/retargeting.md).
+            :meth:`~.self_collision.DistanceDamper.compute_bounds`). Off by default: the legs
+            then turn faster, which the contact rows hold only with their corrector step
+            (``contacts`` ``refine``, on by default); ``g1_whole_body.yaml`` turns it on
+            (measured in docs/retargeting.md).
         hull_vertices: lighter conservative hulls (see :mod:`.self_collision`).
         name: constraint name.
 

@@ -235,7 +235,14 @@ class Controller:
     def _build_level(self) -> Level:
         """The :class:`Level` of the YAML ``level:``."""
         if self.level == "velocity":
-            return VelocityLevel(self.robot, self.strategy, self.fallback, self.last_timings)
+            refiners, i = [], 0
+            for con in self.row_constraints:
+                if type(con).refine_rows is not Constraint.refine_rows:
+                    refiners.append((con, slice(i, i + con.n_rows)))
+                i += con.n_rows
+            return VelocityLevel(
+                self.robot, self.strategy, self.fallback, self.last_timings, refiners
+            )
         reg_spec = self.config.get("regularization")
         has_damping = isinstance(reg_spec, Mapping) and "damping" in reg_spec
         return AccelerationLevel(

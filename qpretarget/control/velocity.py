@@ -12,6 +12,10 @@ solves) and so is a fallback that fails: the tick *brakes* (:func:`braking_veloc
 slows down at its acceleration limit within the tick's box, the floating base keeps the contacts
 to first order), is flagged ``held`` and says why — never :math:`v = 0` from full speed. The
 configuration is integrated explicitly, :math:`q^+ = q \oplus v\,dt`.
+
+Corrector steps: a row constraint with ``refine_rows`` (the contacts) compares what its rows
+asked for with what the solved step reaches at :math:`q^+`; when they differ it shifts its rows
+and the tick is solved again, the same way (``VelocityLevel._refine``).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import time
 
 import numpy as np
 
+from ..constraints.base import Constraint
 from ..robot import RobotModel
 from ..strategies import Strategy, StrategyResult, TickProblem
 from .levels import Level, LevelOutcome
@@ -93,23 +98,35 @@ class VelocityLevel(Level):
         strategy: Strategy,
         fallback: Fallback | None,
         timings: dict[str, float],
+        refiners: list[tuple[Constraint, slice]] | None = None,
     ) -> None:
         super().__init__(timings)
         self.robot, self.strategy, self.fallback = robot, strategy, fallback
+        #: Row constraints with a corrector step (``Constraint.refine_rows``) and their rows.
+        self.refiners = refiners or []
+        #: Extra solves of the last tick's corrector steps.
+        self.refined = 0
+
+    def _solve_once(
+        self, tp: TickProblem
+    ) -> tuple[np.ndarray | None, StrategyResult, dict[str, float] | None, np.ndarray | None]:
+        """One solve of ``tp``: ``(x, result, relaxed, q_next)``.
+
+        A compiled tick may solve and integrate in one kernel call (docs/benchmarks.md;
+        ``q_next`` is then its integration, else ``None``); any tick it does not finish
+        cleanly is solved by :func:`solve_with_fallback`.
+        """
+        fused = self.strategy.solve_fused(tp) if tp.compiled is not None else None
+        if fused is not None:
+            res, q_next = fused
+            return res.x, res, (dict(res.slack) if res.slack else None), q_next
+        x, res, relaxed = solve_with_fallback(self.strategy, self.fallback, tp)
+        return x, res, relaxed, None
 
     def solve(self, tp: TickProblem) -> LevelOutcome:
         """One velocity-level solve with fallback and hold (see the module docstring)."""
         ts = time.perf_counter()
-        # A compiled tick may solve and integrate in one kernel call (docs/benchmarks.md);
-        # any tick it does not finish cleanly is solved here as always.
-        fused = self.strategy.solve_fused(tp) if tp.compiled is not None else None
-        q_next: np.ndarray | None = None
-        if fused is not None:
-            res, q_next = fused
-            x = res.x
-            fb_relaxed = dict(res.slack) if res.slack else None
-        else:
-            x, res, fb_relaxed = solve_with_fallback(self.strategy, self.fallback, tp)
+        x, res, fb_relaxed, q_next = self._solve_once(tp)
         # Wall time of strategy + fallback, minus the strategy's own solver time.
         self.timings["assembly"] = time.perf_counter() - ts - res.solve_time
         self.timings["solve"] = res.solve_time
@@ -156,7 +173,48 @@ class VelocityLevel(Level):
             np.clip(x, tp.lb, tp.ub, out=x)
         out.v_next = x
         out.q_next = self.robot.integrate(tp.state.q, x, tp.dt) if q_next is None else q_next
+        self.refined = 0
+        if self.refiners and out.status != "held":
+            self._refine(tp, out)
         return out
+
+    def _refine(self, tp: TickProblem, out: LevelOutcome) -> None:
+        """Corrector steps: rows shifted by what the solved step did not predict, solved again.
+
+        Each refining constraint (``Constraint.refine_rows``) compares its rows' request with
+        the configuration the solved velocity reaches and shifts its bounds; while any does,
+        the tick is solved again (the same QP with those bounds, hot-started), at most the
+        constraints' ``refine_iterations`` times. A solve that fails keeps the last motion.
+        """
+        n_max = max(getattr(c, "refine_iterations", 1) for c, _ in self.refiners)
+        for _ in range(n_max):
+            changed = False
+            for con, rows in self.refiners:
+                if con.refines() and con.refine_rows(
+                    tp.state, out.q_next, tp.dt, tp.l[rows], tp.u[rows]
+                ):
+                    changed = True
+            if not changed:
+                return
+            ts = time.perf_counter()
+            x, res, relaxed, q_next = self._solve_once(tp)
+            self.timings["solve"] += res.solve_time
+            self.timings["assembly"] += time.perf_counter() - ts - res.solve_time
+            out.solve_time += res.solve_time
+            out.iterations += res.iterations
+            self.refined += 1
+            if x is None or not np.all(np.isfinite(x)):
+                out.messages.append(
+                    f"tick {tp.tick}: a corrector solve failed ({res.status}); the last "
+                    "solved motion is kept."
+                )
+                return
+            if q_next is None:
+                np.clip(x, tp.lb, tp.ub, out=x)
+            out.relaxed = {**tp.bound_gave, **(relaxed or {})}
+            out.status = "relaxed" if out.relaxed else "ok"
+            out.v_next = x
+            out.q_next = self.robot.integrate(tp.state.q, x, tp.dt) if q_next is None else q_next
 
 
 def _fmt(amounts: dict[str, float]) -> str:
