@@ -44,6 +44,14 @@ FOOT_YAW_RANGE = 0.8
 #: acceleration limit, the hip yaw has).
 FOOT_YAW_RATE = 12.0
 
+#: In the person's flight, largest turn rate of a swing sole's yaw target *relative to the
+#: waist's turn* [rad/s]: the target turns with the person's waist plus at most this much. In
+#: flight nothing holds the body and the floating base has no acceleration limit, so a sole
+#: target catching up at :data:`FOOT_YAW_RATE` from where it lifted turned the whole robot
+#: (the dance spin at 4.3 s and 7.2 s: the base at 600 deg/s for 50 ms, 21-24 deg past the
+#: person's heading, which it had followed within 1 deg before the flight).
+FLIGHT_FOOT_YAW_RATE = 4.0
+
 _OTHER = {"left": "right", "right": "left"}
 
 #: Absolute placement (``stepping.absolute``) is used in full while the robot's heading is
@@ -75,6 +83,11 @@ STRIDE_MEAN_YAW = 0.5
 REACH_RAISE = 0.03
 
 
+def _wrap(a: float) -> float:
+    """``a`` wrapped to [-pi, pi] [rad]."""
+    return math.atan2(math.sin(a), math.cos(a))
+
+
 class FootTargets:
     """The person's feet -> robot swing-sole targets, for one run.
 
@@ -101,6 +114,7 @@ class FootTargets:
         self.dt = float(dt)
         #: side -> last yaw change of the swing-sole target since calibration [rad], unwrapped.
         self._yaw_target: dict[str, float] = {}
+        self._waist_last: float | None = None  # the waist's turn at the last orient [rad]
         self.absolute = absolute
         #: side -> (robot ankle, person's ankle) at the first sample (``absolute`` placement).
         self.origin: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -399,8 +413,12 @@ class FootTargets:
         kp: Mapping[str, np.ndarray],
         soles: Mapping[str, pin.SE3],
         waist_dyaw: Callable[[], float],
+        flight: bool = False,
     ) -> tuple[dict[str, pin.SE3], dict[str, tuple[float, np.ndarray] | None]]:
         """Swing-sole poses at the scaled ankles, with the feet's yaw.
+
+        In the person's ``flight`` a yaw target turns with the waist plus at most
+        :data:`FLIGHT_FOOT_YAW_RATE` relative to it, else at most :data:`FOOT_YAW_RATE`.
 
         Also ``(yaw, points)`` of each person's foot whose yaw is measured now (for pivots;
         else ``None``): its ankle and toe times the leg-length ratio (their displacements are
@@ -424,13 +442,19 @@ class FootTargets:
                 off = max(-FOOT_YAW_RANGE, min(FOOT_YAW_RANGE, off))
                 dpsi = base + off
                 last = self._yaw_target.get(s)
-                if last is not None:
+                if last is not None and flight and self._waist_last is not None:
+                    lim = FLIGHT_FOOT_YAW_RATE * self.dt
+                    rel = _wrap(last - self._waist_last)
+                    rel += max(-lim, min(lim, _wrap(off - rel)))
+                    dpsi = last + _wrap(base + rel - last)
+                elif last is not None:
                     lim = FOOT_YAW_RATE * self.dt
-                    step = math.atan2(math.sin(dpsi - last), math.cos(dpsi - last))
+                    step = _wrap(dpsi - last)
                     dpsi = last + max(-lim, min(lim, step))
                 self._yaw_target[s] = dpsi
                 R = rot_z(dpsi) @ feet.sole_ref[s].rotation
                 desired[s] = pin.SE3(R, desired[s].translation)
+        self._waist_last = waist_dyaw()
         return desired, human_foot
 
     def place(
@@ -611,6 +635,7 @@ def initial_soles(
 
 __all__ = [
     "FOOT_YAW_RANGE",
+    "FLIGHT_FOOT_YAW_RATE",
     "FOOT_YAW_RATE",
     "INITIAL_RAISE",
     "INITIAL_STRIDE",

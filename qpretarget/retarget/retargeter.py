@@ -742,7 +742,7 @@ class Retargeter:
         def waist_dyaw() -> float:
             return waist_yaw(kp, rots) - self._waist_yaw_cal
 
-        desired, human_foot = ft.orient(scaled, kp, soles, waist_dyaw)
+        desired, human_foot = ft.orient(scaled, kp, soles, waist_dyaw, flight=self.detector.flight)
         base = ctrl.state.q
         yaw = math.atan2(
             2.0 * (base[6] * base[5] + base[3] * base[4]),
