@@ -109,7 +109,8 @@ class Contacts(Constraint):
         second_order: anticipate the second-order drift of the tick (module docstring).
         max_correction: caps of the drift-correction speed ``[linear m/s, angular rad/s]``.
         refine: after a solve, correct the rows for the solved step's own drift and solve
-            again (:meth:`refine_rows`), at most ``refine_iterations`` times a tick.
+            again (:meth:`refine_rows`), at most ``refine_iterations`` times a tick (default:
+            as ``second_order``).
         refine_tolerance: residual that triggers it [m] (a rotation's times the sole's
             half-length).
         refine_iterations: most extra solves a tick.
@@ -130,20 +131,22 @@ class Contacts(Constraint):
         gain: float | None = None,
         second_order: bool = True,
         max_correction: Sequence[float] = (0.5, 2.0),
-        refine: bool = True,
+        refine: bool | None = None,
         refine_tolerance: float = 5e-5,
         refine_iterations: int = 2,
         name: str | None = None,
     ) -> None:
         super().__init__(name)
-        self.refine = check_bool(refine, "refine")
+        self.second_order = check_bool(second_order, "second_order")
+        # Default: with the second-order anticipation (both go beyond the first-order rows;
+        # ``second_order: false`` alone gives the plain J v = K e of a fixed benchmark).
+        self.refine = self.second_order if refine is None else check_bool(refine, "refine")
         self.refine_tolerance = positive_float(refine_tolerance, "refine_tolerance [m]")
         self.refine_iterations = int(refine_iterations)
         if self.refine_iterations < 1 or self.refine_iterations != refine_iterations:
             raise ConfigError(
                 f"refine_iterations must be a whole number >= 1, got {refine_iterations!r}."
             )
-        self.second_order = check_bool(second_order, "second_order")
         if (
             isinstance(max_correction, str)
             or not isinstance(max_correction, Sequence)
