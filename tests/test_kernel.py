@@ -423,3 +423,43 @@ def test_fused_tick_equals_the_unfused_compiled_tick(shared_dir: Path, variant: 
     err = np.abs(runs[0] - runs[2]).max()
     assert err <= 1e-9, f"active-set check vs DAQP: {err:.2e} rad"
     assert np.mean(iters[0] == 0) >= 0.5  # the verified active set spared DAQP's iterations
+
+
+@needs_kernel
+def test_the_contacts_corrector_step_is_the_same_in_the_kernel(shared_dir: Path) -> None:
+    """``Contacts.refine_rows`` with the compiled tick equals its Python code: the same
+    decision and the same shifted rows (1e-9 in row units [m/s, rad/s]: the residual is a
+    difference of poses ~1e-16 apart in the two paths, divided by dt = 0.01, with margin).
+
+    At tick 40 of the shared workload, q_next = q + v dt (the last tick's velocity, the feet
+    held) is within the 0.05 mm tolerance: no corrector solve; the same with the base moved by
+    a few millimetres exceeds it: both paths must agree on both.
+    """
+    cfg, targets, q0, q_nom = _workload(shared_dir)
+    ctrl = Controller(cfg)
+    assert ctrl.compiled is not None
+    ctrl.reset(q0)
+    ctrl.task("posture").set_target(q_nom)
+    for k in range(1, 40):
+        ctrl.step(targets(k))
+    con = ctrl.constraint("contacts")
+    ctrl.build_tick(ctrl.dt)  # the tick's rows and kinematics, as the level sees them
+    rows = slice(0, 12)
+    i = 0
+    for c in ctrl.row_constraints:
+        if c is con:
+            rows = slice(i, i + c.n_rows)
+        i += c.n_rows
+    for shift in (np.array([0.003, -0.002, 0.001]), np.zeros(3)):
+        q_next = ctrl.robot.integrate(ctrl.state.q, ctrl.v, ctrl.dt)
+        q_next[:3] += shift
+        results = []
+        for kern in (ctrl.compiled.tick, None):
+            l, u = ctrl._l[rows].copy(), ctrl._u[rows].copy()
+            changed = con.refine_rows(ctrl.state, q_next, ctrl.dt, l, u, kern)
+            results.append((changed, l, u))
+        (c1, l1, u1), (c2, l2, u2) = results
+        assert c1 == c2
+        np.testing.assert_allclose(l1, l2, rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(l1, u1)
+        assert c1 == bool(shift.any())

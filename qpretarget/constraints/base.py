@@ -170,7 +170,13 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
         return False
 
     def refine_rows(
-        self, state: RobotState, q_next: np.ndarray, dt: float, l: np.ndarray, u: np.ndarray
+        self,
+        state: RobotState,
+        q_next: np.ndarray,
+        dt: float,
+        l: np.ndarray,
+        u: np.ndarray,
+        kernel: Any = None,
     ) -> bool:
         r"""Correct this tick's rows for what the solved step really does (a corrector step).
 
@@ -178,7 +184,9 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
         the configuration ``q_next`` the solved velocity reaches, a module may shift its rows'
         bounds ``l``, ``u`` (views of its own rows, changed in place) by the part of the
         step its rows did not predict; the level then solves the tick again with them
-        (``control/velocity.py``). Default: nothing to correct.
+        (``control/velocity.py``). ``kernel`` is the compiled tick (``qpretarget._kernel``)
+        when the tick was compiled, for a module that registered a compiled part. Default:
+        nothing to correct.
 
         Returns:
             ``True`` when the bounds changed (the level solves again).

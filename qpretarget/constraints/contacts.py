@@ -179,6 +179,7 @@ class Contacts(Constraint):
         self._anchor_p = np.zeros((0, 3))
         self._anchor_R = np.zeros((0, 3, 3))
         self._anchor_step = np.zeros((0, 6))
+        self._kernel_index: int | None = None  # this block's index in the compiled tick
         #: Incremented whenever the active set or an anchor changes (listeners compare it).
         self.version = 0
 
@@ -401,12 +402,19 @@ class Contacts(Constraint):
         The kernel reads the active set and the anchors from this object's arrays, which
         :meth:`set_contacts` and :meth:`set_anchor` change in place.
         """
-        tick.add_contacts(
+        index = tick.add_contacts(
             row, list(self.frame_ids), -1.0 if self.gain is None else self.gain,
             self.second_order, self.max_correction[0], self.max_correction[1], self._active,
             self._anchor_p, self._anchor_R, self._anchor_step,
         )  # fmt: skip
+        # The corrector step runs in the kernel too (the same residual, to round-off). Only the
+        # index is kept: the tick holds this object's arrays, a reference back would be a cycle
+        # through a C++ object that the garbage collector cannot see.
+        self._kernel_index = int(index) if hasattr(tick, "refine_contacts") else None
         return True
+
+    def kernel_detached(self) -> None:
+        self._kernel_index = None
 
     def _target_velocity(self, i: int, M: pin.SE3, k: float, dt: float) -> np.ndarray:
         """The sole's velocity over the tick that contact ``i``'s rows ask for.
@@ -468,7 +476,13 @@ class Contacts(Constraint):
         return self.refine and bool(self._active.any())
 
     def refine_rows(
-        self, state: RobotState, q_next: np.ndarray, dt: float, l: np.ndarray, u: np.ndarray
+        self,
+        state: RobotState,
+        q_next: np.ndarray,
+        dt: float,
+        l: np.ndarray,
+        u: np.ndarray,
+        kernel: Any = None,
     ) -> bool:
         r"""The corrector step of the contact rows (:meth:`Constraint.refine_rows`).
 
@@ -484,6 +498,12 @@ class Contacts(Constraint):
         """
         if not self.refine:
             return False
+        if kernel is not None and self._kernel_index is not None:
+            return bool(
+                kernel.refine_contacts(
+                    self._kernel_index, q_next, dt, self.refine_tolerance, self._half_length, l, u
+                )
+            )
         active = np.flatnonzero(self._active)
         if not active.size:
             return False

@@ -187,11 +187,12 @@ class VelocityLevel(Level):
         constraints' ``refine_iterations`` times. A solve that fails keeps the last motion.
         """
         n_max = max(getattr(c, "refine_iterations", 1) for c, _ in self.refiners)
+        kernel = tp.compiled.tick if tp.compiled is not None else None
         for _ in range(n_max):
             changed = False
             for con, rows in self.refiners:
                 if con.refines() and con.refine_rows(
-                    tp.state, out.q_next, tp.dt, tp.l[rows], tp.u[rows]
+                    tp.state, out.q_next, tp.dt, tp.l[rows], tp.u[rows], kernel
                 ):
                     changed = True
             if not changed:

@@ -46,6 +46,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -231,6 +232,73 @@ struct ContactsK {
   Buf active_b, anchor_p, anchor_R, anchor_step;  // the Python constraint's arrays (in place)
   bool *active = nullptr;
   Mat6x J6;
+  // The sole velocity contact i's rows ask for, before the second-order anticipation: the
+  // capped drift correction plus a moving anchor's step (constraints/contacts.py,
+  // Contacts._target_velocity).
+  void target(size_t i, const pinocchio::SE3 &M, double k, double dt, Eigen::Vector3d &lin,
+              Eigen::Vector3d &ang) const {
+    const Eigen::Matrix3d &R = M.rotation();
+    Eigen::Map<const Eigen::Vector3d> pa(anchor_p.p + 3 * i);
+    Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> Ra(anchor_R.p + 9 * i);
+    Eigen::Map<const Eigen::Matrix<double, 6, 1>> step(anchor_step.p + 6 * i);
+    bool moving = !step.isZero(0.0);  // a moving anchor's step: fed forward, not capped
+    lin = pa - M.translation();
+    Eigen::Matrix3d Rrel = R.transpose() * Ra;
+    ang = R * pinocchio::log3(Rrel);
+    if (moving) {
+      lin -= step.head<3>();
+      ang -= step.tail<3>();
+    }
+    lin *= k;
+    ang *= k;
+    double n2 = lin.dot(lin);
+    if (n2 > cap_lin * cap_lin) lin *= cap_lin / std::sqrt(n2);
+    n2 = ang.dot(ang);
+    if (n2 > cap_ang * cap_ang) ang *= cap_ang / std::sqrt(n2);
+    if (moving) {
+      lin += step.head<3>() / dt;
+      ang += step.tail<3>() / dt;
+    }
+  }
+  // The corrector step (Contacts.refine_rows): d holds the tick's kinematics, rd is scratch.
+  // Shifts this block's rows in l, u (the block's own views) by the residual / dt and returns
+  // true when a residual exceeds tol (linear [m]; angular [rad] times half_length).
+  bool refine(const Model &m, const Data &d, Data &rd, const Eigen::VectorXd &qn, double dt,
+              double tol, double half_length, double *l, double *u) const {
+    bool any = false;
+    for (size_t i = 0; i < fids.size(); ++i) any = any || active[i];
+    if (!any) return false;
+    pinocchio::forwardKinematics(m, rd, qn);
+    double k = (gain <= 0) ? 1.0 / dt : std::min(gain, 1.0 / dt);
+    double worst = 0.0;
+    std::vector<Eigen::Matrix<double, 6, 1>> res(fids.size(), Eigen::Matrix<double, 6, 1>::Zero());
+    for (size_t i = 0; i < fids.size(); ++i) {
+      if (!active[i]) continue;
+      int fid = fids[i];
+      const auto &M = d.oMf[fid];
+      Eigen::Vector3d lin, ang;
+      target(i, M, k, dt, lin, ang);
+      pinocchio::updateFramePlacement(m, rd, fid);
+      const auto &Mn = rd.oMf[fid];
+      res[i].head<3>() = Mn.translation() - (M.translation() + lin * dt);
+      Eigen::Vector3d w = ang * dt;
+      Eigen::Matrix3d Rstar = pinocchio::exp3(w) * M.rotation();
+      Eigen::Matrix3d Rn = Mn.rotation() * Rstar.transpose();
+      res[i].tail<3>() = pinocchio::log3(Rn);
+      worst = std::max(worst, res[i].head<3>().cwiseAbs().maxCoeff() / tol);
+      worst = std::max(worst, res[i].tail<3>().cwiseAbs().maxCoeff() * half_length / tol);
+    }
+    if (worst <= 1.0) return false;
+    for (size_t i = 0; i < fids.size(); ++i) {
+      if (!active[i]) continue;
+      int r0 = 6 * int(i);
+      for (int j = 0; j < 6; ++j) {
+        l[r0 + j] -= res[i][j] / dt;
+        u[r0 + j] = l[r0 + j];
+      }
+    }
+    return true;
+  }
   void compute(const Model &m, Data &d, Data &vd, bool &vd_ready, const Eigen::VectorXd &q,
                const Eigen::VectorXd &v, double dt, MapRM &C, double *l, double *u) {
     double k = (gain <= 0) ? 1.0 / dt : std::min(gain, 1.0 / dt);
@@ -242,7 +310,6 @@ struct ContactsK {
       vd_ready = true;
     }
     double half_dt = 0.5 * dt;
-    double cl2 = cap_lin * cap_lin, ca2 = cap_ang * cap_ang;
     for (size_t i = 0; i < fids.size(); ++i) {
       int r0 = row + 6 * int(i);
       if (!active[i]) {
@@ -255,31 +322,11 @@ struct ContactsK {
       }
       int fid = fids[i];
       const auto &M = d.oMf[fid];
-      const Eigen::Matrix3d &R = M.rotation();
       J6.setZero(6, m.nv);
       pinocchio::getFrameJacobian(m, d, fid, pinocchio::LOCAL_WORLD_ALIGNED, J6);
       C.block(r0, 0, 6, m.nv) = J6;
-      Eigen::Map<const Eigen::Vector3d> pa(anchor_p.p + 3 * i);
-      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> Ra(anchor_R.p + 9 * i);
-      Eigen::Map<const Eigen::Matrix<double, 6, 1>> step(anchor_step.p + 6 * i);
-      bool moving = !step.isZero(0.0);  // a moving anchor's step: fed forward, not capped
-      Eigen::Vector3d lin = pa - M.translation();
-      Eigen::Matrix3d Rrel = R.transpose() * Ra;
-      Eigen::Vector3d ang = R * pinocchio::log3(Rrel);
-      if (moving) {
-        lin -= step.head<3>();
-        ang -= step.tail<3>();
-      }
-      lin *= k;
-      ang *= k;
-      double n2 = lin.dot(lin);
-      if (n2 > cl2) lin *= cap_lin / std::sqrt(n2);
-      n2 = ang.dot(ang);
-      if (n2 > ca2) ang *= cap_ang / std::sqrt(n2);
-      if (moving) {
-        lin += step.head<3>() / dt;
-        ang += step.tail<3>() / dt;
-      }
+      Eigen::Vector3d lin, ang;
+      target(i, M, k, dt, lin, ang);
       for (int j = 0; j < 3; ++j) {
         l[r0 + j] = lin[j];
         l[r0 + 3 + j] = ang[j];
@@ -1078,6 +1125,7 @@ struct Tick {
   Model *model;
   Data *data;
   Data vdata;
+  std::unique_ptr<Data> rdata;  // scratch kinematics of the corrector step (refine_contacts)
   nb::object keep_model, keep_data;
   std::vector<std::unique_ptr<TaskK>> tasks;
   std::vector<std::shared_ptr<BoundsK>> bounds;  // merge order (most important first)
@@ -1166,7 +1214,7 @@ struct Tick {
     b->hi = Eigen::Map<const Eigen::VectorXd>(hi.data(), hi.size());
     bounds.push_back(std::move(b));
   }
-  void add_contacts(int row, std::vector<int> fids, double gain, bool second_order, double cap_lin,
+  int add_contacts(int row, std::vector<int> fids, double gain, bool second_order, double cap_lin,
                     double cap_ang, BArr active, Arr anchor_p, Arr anchor_R, Arr anchor_step) {
     ContactsK c;
     c.row = row;
@@ -1181,6 +1229,16 @@ struct Tick {
     c.anchor_R = Buf(anchor_R);
     c.anchor_step = Buf(anchor_step);
     contacts.push_back(std::move(c));
+    return int(contacts.size()) - 1;
+  }
+  // The corrector step of contacts block `index` (Contacts.refine_rows): l, u are its rows.
+  bool refine_contacts(int index, CArr q_next, double dt, double tol, double half_length, Arr l_,
+                       Arr u_) {
+    const Model &m = *model;
+    if (!rdata) rdata = std::make_unique<Data>(m);
+    Eigen::Map<const Eigen::VectorXd> qn(q_next.data(), m.nq);
+    return contacts.at(index).refine(m, *data, *rdata, qn, dt, tol, half_length, l_.data(),
+                                     u_.data());
   }
 
   void add_polygon(nb::object py, nb::object contacts_, int row, int n_rows, double gain,
@@ -1527,6 +1585,7 @@ NB_MODULE(_kernel, m) {
       .def("add_joint_limits", &Tick::add_joint_limits)
       .def("add_const_bounds", &Tick::add_const_bounds)
       .def("add_contacts", &Tick::add_contacts)
+      .def("refine_contacts", &Tick::refine_contacts)
       .def("add_polygon", &Tick::add_polygon)
       .def("add_damper", &Tick::add_damper)
       .def("add_damper_bounds", &Tick::add_damper_bounds)

