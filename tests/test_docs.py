@@ -278,6 +278,7 @@ CHANGES: dict[tuple[str, str, str], tuple[dict[str, Any], Any]] = {
     ("constraints", "velocity_limits", "scale"): ({}, 0.05),
     ("constraints", "acceleration_limits", "a_max"): ({}, 20.0),
     ("constraints", "acceleration_limits", "braking"): ({"entry": {"a_max": 100.0}}, False),
+    ("constraints", "acceleration_limits", "base"): ({}, [1.0, 5.0]),
     ("constraints", "contacts", "feet"): ({}, ["left_foot"]),
     ("constraints", "contacts", "frames"): ({}, {"left_sole": "left_ankle_roll_link"}),
     ("constraints", "contacts", "active"): ({}, ["left_foot"]),

@@ -66,6 +66,9 @@ class AccelerationLimits(Constraint):
             covered by ``default`` are not limited).
         braking: also bound the velocity so that each joint can stop before its position limit
             at ``a_max`` (module docstring).
+        base: ``[linear m/s^2, angular rad/s^2]``: also bound the floating base's velocity
+            change per tick, :math:`|v_b - v_{b,prev}| \le a_b\,dt` per coordinate (the base's
+            six velocity coordinates, in its own frame); ``null`` (default): the base is free.
         name: constraint name.
 
     Raises:
@@ -81,9 +84,20 @@ class AccelerationLimits(Constraint):
         *,
         a_max: float | Mapping[str, float],
         braking: bool = True,
+        base: Sequence[float] | None = None,
         name: str | None = None,
     ) -> None:
         super().__init__(name)
+        if base is not None:
+            if isinstance(base, str) or not isinstance(base, Sequence) or len(base) != 2:
+                raise ConfigError(
+                    f"base must be [linear m/s^2, angular rad/s^2] or null, got {base!r}."
+                )
+            base = (
+                positive_float(base[0], "base[0] [m/s^2]"),
+                positive_float(base[1], "base[1] [rad/s^2]"),
+            )
+        self.base = base
         if not isinstance(braking, bool):
             raise ConfigError(f"braking must be true or false, got {braking!r}.")
         self.braking = braking
@@ -109,6 +123,19 @@ class AccelerationLimits(Constraint):
             a = np.full(nj, spec)
         limited = np.isfinite(a)
         self.a_max = a
+        # The floating base's coordinates (the velocity indices no joint owns), if bounded.
+        owned = np.zeros(robot.nv, dtype=bool)
+        owned[robot.joint_v_index] = True
+        self._bi = np.flatnonzero(~owned)
+        self._ba = np.zeros(len(self._bi))
+        if self.base is not None:
+            if len(self._bi) != 6:
+                raise ConfigError(
+                    f"base: robot {robot.name!r} has no free-flyer base "
+                    f"({len(self._bi)} unactuated coordinates).",
+                    path=f"{path}.base" if path else "base",
+                )
+            self._ba = np.array([self.base[0]] * 3 + [self.base[1]] * 3)
         self._vi = robot.joint_v_index[limited]
         self._qi = robot.joint_q_index[limited]
         self._a = a[limited]
@@ -180,8 +207,15 @@ class AccelerationLimits(Constraint):
             np.maximum(lo, np.minimum(-nu[1], hi), out=lo)
         self._lb[self._vi] = lo
         self._ub[self._vi] = hi
+        if self.base is not None:
+            vb = self._v_prev[self._bi]
+            self._lb[self._bi] = vb - self._ba * dt
+            self._ub[self._bi] = vb + self._ba * dt
         return self._lb, self._ub
 
     def __repr__(self) -> str:
         spec: Any = self._spec
-        return f"AccelerationLimits(a_max={spec}, braking={self.braking}, name={self.name!r})"
+        return (
+            f"AccelerationLimits(a_max={spec}, braking={self.braking}, base={self.base}, "
+            f"name={self.name!r})"
+        )

@@ -66,6 +66,34 @@ def test_bad_values_are_config_errors(g1, make_config) -> None:
     cfg["constraints"][-1] = {"type": "acceleration_limits", "a_max": 10.0, "braking": "yes"}
     with pytest.raises(ConfigError, match="braking"):
         Controller(cfg)
+    for base in ([1.0], [0.0, 1.0], "fast", [1.0, -2.0]):
+        cfg["constraints"][-1] = {"type": "acceleration_limits", "a_max": 10.0, "base": base}
+        with pytest.raises(ConfigError, match="base"):
+            Controller(cfg)
+
+
+def test_base_limits_bound_the_floating_base_too(g1, make_config, make_wild_targets) -> None:
+    """``base: [a_lin, a_ang]``: the free-flyer's six velocity coordinates change by at most
+    a dt per tick in which nothing gave (tolerance 1e-9, as above); without it the same wild
+    targets change them by up to 1.09 m/s and 2.05 rad/s in a tick (measured; with it 0.2 and
+    1.0: the limits)."""
+    a_lin, a_ang = 20.0, 100.0
+    cfg = make_config(g1, a_max=None)
+    cfg["constraints"].append({"type": "acceleration_limits", "a_max": 100.0, "base": [a_lin, a_ang]})
+    ctrl = Controller(cfg)
+    lo, hi = ctrl.constraint("acceleration_limits").compute_bounds(ctrl.state, ctrl.dt)
+    assert hi[:3] == pytest.approx([a_lin * ctrl.dt] * 3) and hi[3:6] == pytest.approx([1.0] * 3)
+    limit = np.array([a_lin] * 3 + [a_ang] * 3) * ctrl.dt
+    v_prev = np.zeros(g1.nv)
+    worst, checked = -np.inf, 0
+    for targets in make_wild_targets(ctrl, 200, seed=3):
+        res = ctrl.step(targets)
+        if "acceleration_limits" not in res.relaxed:
+            worst = max(worst, float(np.max(np.abs(res.v[:6] - v_prev[:6]) - limit)))
+            checked += 1
+        v_prev = np.array(res.v)
+    assert checked > 150
+    assert worst <= 1e-9, worst
 
 
 @pytest.mark.parametrize("braking", [True, False])
