@@ -90,6 +90,8 @@ class Constraint(abc.ABC):  # noqa: B024 - every hook has a default; subclasses 
     #: is only an accuracy device (a collision pair's trust region) can sit below the
     #: acceleration limits (80) while its rows stay above them.
     box_importance: ClassVar[int | None] = None
+    #: Most corrector solves a tick this module asks for (:meth:`refine_rows`).
+    refine_iterations: int = 1
 
     def __init__(self, name: str | None = None) -> None:
         if name is not None and (not isinstance(name, str) or not name):

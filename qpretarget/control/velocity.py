@@ -186,7 +186,7 @@ class VelocityLevel(Level):
         the tick is solved again (the same QP with those bounds, hot-started), at most the
         constraints' ``refine_iterations`` times. A solve that fails keeps the last motion.
         """
-        n_max = max(getattr(c, "refine_iterations", 1) for c, _ in self.refiners)
+        n_max = max(c.refine_iterations for c, _ in self.refiners)
         kernel = tp.compiled.tick if tp.compiled is not None else None
         for _ in range(n_max):
             changed = False

@@ -330,7 +330,7 @@ def calibrate(
     human_heading, robot_heading = _headings(
         human_pts, robot_pts, human_waist_rotation, robot_waist_rotation, notes
     )
-    yaw = _wrap(robot_heading - human_heading)
+    yaw = wrap_angle(robot_heading - human_heading)
     h_ankle, r_ankle = _ankle_heights(human_pts, robot_pts, notes)
     human_foot_yaw, robot_foot_yaw = _foot_yaws(human_pts, robot_foot_rotations)
     ratio = _double_support_ratio(human_pts, robot_pts)
@@ -478,8 +478,8 @@ def _heading_from_points(points: Mapping[str, np.ndarray]) -> float:
     return math.nan
 
 
-def _wrap(angle: float) -> float:
-    """Angle wrapped to (-pi, pi]."""
+def wrap_angle(angle: float) -> float:
+    """Angle wrapped to (-pi, pi] [rad]."""
     return float(math.atan2(math.sin(angle), math.cos(angle)))
 
 
@@ -493,5 +493,6 @@ __all__ = [
     "nearest_rotation",
     "rotation_z",
     "triad",
+    "wrap_angle",
     "yaw_of",
 ]

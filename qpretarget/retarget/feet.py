@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from ..motion.calibration import Calibration, yaw_of
+from ..motion.calibration import Calibration, wrap_angle, yaw_of
 from ..motion.phases import SIDES
 from .support import FootSupport, rot_z
 
@@ -81,11 +81,6 @@ STRIDE_MEAN_YAW = 0.5
 #: -> 0.69 of the person's, smallest kata lift 0.49 -> 0.21, spin heading error 47 -> 52 deg),
 #: and so did raising whenever no robot foot stands (the kata's: 0.49 -> 0.39).
 REACH_RAISE = 0.03
-
-
-def _wrap(a: float) -> float:
-    """``a`` wrapped to [-pi, pi] [rad]."""
-    return math.atan2(math.sin(a), math.cos(a))
 
 
 class FootTargets:
@@ -444,12 +439,12 @@ class FootTargets:
                 last = self._yaw_target.get(s)
                 if last is not None and flight and self._waist_last is not None:
                     lim = FLIGHT_FOOT_YAW_RATE * self.dt
-                    rel = _wrap(last - self._waist_last)
-                    rel += max(-lim, min(lim, _wrap(off - rel)))
-                    dpsi = last + _wrap(base + rel - last)
+                    rel = wrap_angle(last - self._waist_last)
+                    rel += max(-lim, min(lim, wrap_angle(off - rel)))
+                    dpsi = last + wrap_angle(base + rel - last)
                 elif last is not None:
                     lim = FOOT_YAW_RATE * self.dt
-                    step = _wrap(dpsi - last)
+                    step = wrap_angle(dpsi - last)
                     dpsi = last + max(-lim, min(lim, step))
                 self._yaw_target[s] = dpsi
                 R = rot_z(dpsi) @ feet.sole_ref[s].rotation

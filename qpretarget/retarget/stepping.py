@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..motion.calibration import wrap_angle
 from ..motion.phases import _OTHER, SIDES, _positive, min_jerk
 
 #: Foot states.
@@ -253,10 +254,6 @@ def _least_motion(xy: np.ndarray, xy0: np.ndarray) -> float:
         return float(np.linalg.norm(d[0]))
     path = (1.0 - _SEGMENT)[:, None] * d[0] + _SEGMENT[:, None] * d[1]
     return float(np.min(np.linalg.norm(path, axis=1)))
-
-
-def _wrap(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
 
 
 class KinematicStepper:
@@ -771,7 +768,7 @@ class KinematicStepper:
         yaw_last, turn, xy0, anchor_yaw0, active = start
         st = self.settings
         yaw, points = foot
-        turn += _wrap(yaw - yaw_last)
+        turn += wrap_angle(yaw - yaw_last)
         start[0], start[1] = yaw, turn
         xy = _xy(points)
         if xy.shape != xy0.shape or _least_motion(xy, xy0) > st.pivot_radius:
@@ -782,7 +779,7 @@ class KinematicStepper:
             start[4] = True
         if yaw is not None:
             yaw_u = self._yaw_u.get(side, anchor_yaw0)
-            return self._turn_anchor(side, yaw_u + _wrap(yaw - yaw_u))
+            return self._turn_anchor(side, yaw_u + wrap_angle(yaw - yaw_u))
         return self._turn_anchor(side, anchor_yaw0 + turn)
 
     def _turn_anchor(self, side: str, goal: float | None) -> pin.SE3 | None:
@@ -798,7 +795,7 @@ class KinematicStepper:
         anchor = self._anchor[side]
         base = _yaw_of(anchor.rotation)
         yaw_u = self._yaw_u.get(side)
-        if yaw_u is None or abs(_wrap(yaw_u - base)) > 1e-6:
+        if yaw_u is None or abs(wrap_angle(yaw_u - base)) > 1e-6:
             yaw_u = base  # the anchor was set elsewhere (a landing): count from it
         r = 0.0 if goal is None else goal - yaw_u
         w = _ramp(self._omega.get(side, 0.0), r, self.dt, st.pivot_rate, st.pivot_accel)

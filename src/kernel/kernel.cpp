@@ -263,15 +263,16 @@ struct ContactsK {
   // The corrector step (Contacts.refine_rows): d holds the tick's kinematics, rd is scratch.
   // Shifts this block's rows in l, u (the block's own views) by the residual / dt and returns
   // true when a residual exceeds tol (linear [m]; angular [rad] times half_length).
+  std::vector<Eigen::Matrix<double, 6, 1>> res;  // refine()'s residuals (sized once)
   bool refine(const Model &m, const Data &d, Data &rd, const Eigen::VectorXd &qn, double dt,
-              double tol, double half_length, double *l, double *u) const {
+              double tol, double half_length, double *l, double *u) {
     bool any = false;
     for (size_t i = 0; i < fids.size(); ++i) any = any || active[i];
     if (!any) return false;
     pinocchio::forwardKinematics(m, rd, qn);
     double k = (gain <= 0) ? 1.0 / dt : std::min(gain, 1.0 / dt);
     double worst = 0.0;
-    std::vector<Eigen::Matrix<double, 6, 1>> res(fids.size(), Eigen::Matrix<double, 6, 1>::Zero());
+    res.resize(fids.size());
     for (size_t i = 0; i < fids.size(); ++i) {
       if (!active[i]) continue;
       int fid = fids[i];

@@ -250,21 +250,30 @@ def test_an_unreachable_swing_target_is_raised_before_it_is_pulled_under_the_hip
     assert reach(out) == pytest.approx(rho_l)
 
 
-def test_a_sole_lifted_into_flight_turns_its_yaw_target_from_where_it_is():
+def _left_foot_targets(dt: float):  # noqa: ANN202
+    """FootTargets for the left foot only (the right has no key-points): reference sole yaw 0,
+    the person's calibration foot yaw 0, a 0.2 m toe."""
     from types import SimpleNamespace
 
-    from qpretarget.retarget.feet import FOOT_YAW_RATE, FootTargets
+    from qpretarget.retarget.feet import FootTargets
 
-    # The left foot (the right has no key-points), reference sole yaw 0, the person's foot 30 deg from its calibration yaw (toe
-    # 0.2 m ahead of the ankle, turned), the waist turned as much (within FOOT_YAW_RANGE).
     feet = SimpleNamespace(
         sole_ref={"left": pin.SE3.Identity()},
         swing_sole=lambda *a: pin.SE3.Identity(),
     )
     cal = SimpleNamespace(human_foot_yaw={"left": 0.0})
-    dt = 0.01
     ft = FootTargets(feet, cal, 1.0, {}, 0.92, dt=dt)  # type: ignore[arg-type]
     ft.toe_length["left"] = 0.2
+    return ft
+
+
+def test_a_sole_lifted_into_flight_turns_its_yaw_target_from_where_it_is():
+    from qpretarget.retarget.feet import FOOT_YAW_RATE
+
+    # The left foot (the right has no key-points), reference sole yaw 0, the person's foot 30 deg from its calibration yaw (toe
+    # 0.2 m ahead of the ankle, turned), the waist turned as much (within FOOT_YAW_RANGE).
+    dt = 0.01
+    ft = _left_foot_targets(dt)
     psi = math.radians(30.0)
     kp = {
         "left_ankle": np.zeros(3),
@@ -301,18 +310,10 @@ def test_in_flight_a_sole_yaw_target_turns_with_the_waist_and_slowly_against_it(
     FOOT_YAW_RATE from where the sole lifted turned the whole robot in flight (the dance spin:
     the base at 600 deg/s for 50 ms, 21-24 deg past the person; heading error 23.9 -> 19.0
     deg with the relative limit)."""
-    from types import SimpleNamespace
+    from qpretarget.retarget.feet import FLIGHT_FOOT_YAW_RATE
 
-    from qpretarget.retarget.feet import FLIGHT_FOOT_YAW_RATE, FootTargets
-
-    feet = SimpleNamespace(
-        sole_ref={"left": pin.SE3.Identity()},
-        swing_sole=lambda *a: pin.SE3.Identity(),
-    )
-    cal = SimpleNamespace(human_foot_yaw={"left": 0.0})
     dt = 0.01
-    ft = FootTargets(feet, cal, 1.0, {}, 0.92, dt=dt)  # type: ignore[arg-type]
-    ft.toe_length["left"] = 0.2
+    ft = _left_foot_targets(dt)
     offset = math.radians(30.0)  # the person's foot, 30 deg from the waist (in FOOT_YAW_RANGE)
     soles = {"left": pin.SE3.Identity(), "right": pin.SE3.Identity()}
 
