@@ -9,6 +9,7 @@ discrete depends on them (no collision witness point switching facets), 300 tick
 
 from __future__ import annotations
 
+import copy
 import os
 import shutil
 import subprocess
@@ -19,6 +20,7 @@ import numpy as np
 import pytest
 
 from qpretarget import Controller
+from qpretarget.errors import ConfigError
 from qpretarget.kernel import daqp_kernel, kernel, python_only, why_not
 from qpretarget.problem import QPProblem
 from qpretarget.yamlio import load_yaml
@@ -463,3 +465,58 @@ def test_the_contacts_corrector_step_is_the_same_in_the_kernel(shared_dir: Path)
         np.testing.assert_allclose(l1, l2, rtol=0, atol=1e-9)
         np.testing.assert_array_equal(l1, u1)
         assert c1 == bool(shift.any())
+
+
+def _run_scaled(cfg: dict, targets, q0, q_nom, n: int, scale) -> np.ndarray:  # noqa: ANN001
+    """As :func:`_run`, the left hand's weight scaled by ``scale(k)`` before tick ``k``."""
+    ctrl = Controller(cfg)
+    ctrl.reset(q0)
+    ctrl.task("posture").set_target(q_nom)
+    out = []
+    for k in range(n):
+        ctrl.set_weight_scale("left_hand", scale(k))
+        out.append(np.array(ctrl.step(targets(k)).q))
+    return np.asarray(out)
+
+
+def test_a_weight_scale_is_the_scaled_config_in_the_kernel_and_in_python(
+    shared_dir: Path,
+) -> None:
+    """Controller.set_weight_scale: the same QP as a config with the scaled weight."""
+    cfg, targets, q0, q_nom = _workload(shared_dir, "A")
+    scaled_cfg = copy.deepcopy(cfg)
+    for t in scaled_cfg["tasks"]:
+        if t["name"] == "left_hand":
+            t["weight"] = 0.05 * float(t.get("weight", 1.0))
+    q_ref = _run(scaled_cfg, targets, q0, q_nom, 60)
+    q_s = _run_scaled(cfg, targets, q0, q_nom, 60, lambda k: 0.05)
+    # Same weights, same QP: equal to round-off (1e-10 rad: the product w * rows in another order).
+    assert np.abs(q_s - q_ref).max() <= 1e-10
+
+    # A scale changed mid-run (0.05 for ticks 20-39): the kernel takes it as Python does, and
+    # the run differs from the unscaled one.
+    def mid(k: int) -> float:
+        return 0.05 if 20 <= k < 40 else 1.0
+
+    q_c = _run_scaled(cfg, targets, q0, q_nom, 60, mid)
+    with python_only():
+        q_p = _run_scaled(cfg, targets, q0, q_nom, 60, mid)
+    assert np.abs(q_c - q_p).max() <= 1e-10
+    assert np.abs(q_c - _run(cfg, targets, q0, q_nom, 60)).max() > 1e-4
+
+
+def test_a_bad_weight_scale_is_one_clear_error(shared_dir: Path) -> None:
+    cfg, _, _, _ = _workload(shared_dir, "A")
+    ctrl = Controller(cfg)
+    with pytest.raises(ConfigError, match="weight scale must be a finite number >= 0"):
+        ctrl.set_weight_scale("left_hand", float("nan"))
+    with pytest.raises(ConfigError, match="no task named 'left_hnd'.*left_hand"):
+        ctrl.set_weight_scale("left_hnd", 0.5)
+    with pytest.raises(ConfigError, match="one finite number >= 0 or 3 of them"):
+        ctrl.set_weight_scale("left_hand", [0.5, 0.5])  # a position task has 3 rows
+    # One factor per row: the rows' weights scaled each by its own.
+    w = ctrl.tasks["left_hand"].weight.copy()
+    ctrl.set_weight_scale("left_hand", [1.0, 0.5, 0.0])
+    assert np.array_equal(ctrl.tasks["left_hand"].weight, w * [1.0, 0.5, 0.0])
+    ctrl.set_weight_scale("left_hand", 1.0)
+    assert np.array_equal(ctrl.tasks["left_hand"].weight, w)

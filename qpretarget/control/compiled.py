@@ -24,6 +24,7 @@ compare the two.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -179,6 +180,11 @@ class CompiledTick:
         """``task`` got a missing (NaN) target: its rows come from Python until it recovers."""
         if task.name in self.compiled_tasks:
             self._ramping[list(self.ctrl.tasks).index(task.name)] = task
+
+    def refresh_weight(self, task: Task) -> None:
+        """``task``'s weight array was replaced (a weight scale): its cost block takes it."""
+        i = list(self.ctrl.tasks).index(task.name)
+        self._blocks[i] = dataclasses.replace(self._blocks[i], weight=task.weight)
 
     def reset(self) -> None:
         """A reset restores every task's full weight."""

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import yaml
 
 from .. import schema
@@ -385,6 +386,24 @@ class Controller:
         raise ConfigError(
             "set_contacts needs a `contacts` constraint in the config.", path="constraints"
         )
+
+    def set_weight_scale(self, task: str, scale: float | npt.ArrayLike) -> None:
+        r"""Weigh task ``task``'s rows :math:`s\,w` from the next tick on (``1``: as configured).
+
+        See :meth:`Task.set_weight_scale <qpretarget.tasks.base.Task.set_weight_scale>`; the
+        compiled kernel's cost block is told too.
+
+        Raises:
+            ConfigError: No task named ``task``, or ``scale`` is not a finite number >= 0.
+        """
+        t = self.tasks.get(task)
+        if t is None:
+            raise ConfigError(
+                f"no task named {task!r}.{close_matches_hint(str(task), list(self.tasks))} "
+                f"Tasks: {', '.join(self.tasks)}."
+            )
+        if t.set_weight_scale(scale) and self.compiled is not None:
+            self.compiled.refresh_weight(t)
 
     def set_targets(self, targets: Mapping[str, Any] | None, messages: list[str]) -> None:
         """Hand each target to its task; NaN targets become missing data (reported)."""

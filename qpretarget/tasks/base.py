@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import ConfigError, TargetError
 from ..registry import Registry
@@ -90,6 +91,10 @@ class Task(abc.ABC):
         self.presence = 1.0  # 0 while the target is missing, ramps back to 1
         self.dim = 0
         self.weight = np.zeros(0)
+        #: Factor on the configured weights, one or one per row (:meth:`set_weight_scale`); 1
+        #: after :meth:`bind`.
+        self.weight_scale: float | np.ndarray = 1.0
+        self._weight_full: np.ndarray | None = None  # the configured weights, once scaled
         self._prev_target: tuple[Any, ...] | None = None  # last tick's target, for feedforward
         #: Where the task sits in the YAML (``tasks[i]``), for error messages.
         self.yaml_path = ""
@@ -104,6 +109,43 @@ class Task(abc.ABC):
         self.weight = weight_vector(
             self._weight_spec, self.dim, f"{path}.weight" if path else "weight"
         )
+        self.weight_scale = 1.0
+        self._weight_full = None
+
+    def set_weight_scale(self, scale: float | npt.ArrayLike) -> bool:
+        r"""Weigh this task's rows :math:`s\,w` instead of the configured :math:`w` from now on.
+
+        For a caller that changes a task's importance with the situation (the retargeter lowers a
+        swing sole's weight in the person's flight, and its orientation rows high above the
+        floor); :meth:`bind` restores ``1``. ``scale`` is one factor or one per row (``dim``). A
+        new weight array is made (strategies reuse square roots of unchanged arrays); call it
+        through :meth:`~qpretarget.control.controller.Controller.set_weight_scale`, which also
+        tells the compiled kernel.
+
+        Returns:
+            ``True`` when the weights changed.
+
+        Raises:
+            ConfigError: ``scale`` is not a finite number >= 0, or not one per row.
+        """
+        what = f"task {self.name!r}: weight scale"
+        if np.ndim(scale) == 0:
+            s: float | np.ndarray = positive_float(scale, what, allow_zero=True)
+        else:
+            arr = np.asarray(scale, dtype=float)
+            if arr.shape != (self.dim,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+                raise ConfigError(
+                    f"{what} must be one finite number >= 0 or {self.dim} of them (one per row), "
+                    f"got {scale!r}."
+                )
+            s = arr.copy()
+        if np.array_equal(s, self.weight_scale):
+            return False
+        if self._weight_full is None:
+            self._weight_full = self.weight
+        self.weight = self._weight_full * s
+        self.weight_scale = s
+        return True
 
     def attach_buffers(self, J: np.ndarray, v_star: np.ndarray) -> None:
         """Write this task's rows into ``J`` (dim, nv) and ``v_star`` (dim,) every tick.
