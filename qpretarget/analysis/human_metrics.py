@@ -43,9 +43,13 @@ with :math:`w_h` the person's waist key-point, :math:`w_r` the robot's pelvis fr
   the robot's different foot placement at the start drop out);
 * *pelvis height error*: robot pelvis height minus the scaled human's (equal at the first
   sample), largest magnitude and RMS;
-* *pelvis tilt error*: change of the pelvis tilt (angle of its z axis from the vertical) since
-  the first sample, robot minus person (the person's pelvis frame from the hips and the
-  waist-neck direction), largest magnitude in degrees;
+* *pelvis tilt error*: the pelvis's lean since the first sample, robot vs person, largest
+  angle in degrees (:func:`pelvis_lean`): where the direction that was vertical at the first
+  sample now points, forward and sideways in the body's own heading frame; the error is the
+  distance between the robot's and the person's (forward, sideways) leans, so a robot leaning
+  forward while the person leans back counts both. The person's pelvis is the rigid triangle
+  of the waist and hip key-points (the BVH root and the thigh joints it carries), the robot's
+  its pelvis frame;
 * *stance slip*: for each stance of a robot foot (touch-down to lift-off: its ``contacts`` column,
   else the sole lower than 5 mm), the largest horizontal distance of the sole from where it
   touched down, the largest over stances [mm] (horizontal, as ``foot_slip`` of
@@ -209,21 +213,48 @@ def _path(xy: np.ndarray, t: np.ndarray) -> float:
     return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
 
 
-def _tilt(R: np.ndarray) -> np.ndarray:
-    return np.degrees(np.arccos(np.clip(R[..., 2, 2], -1.0, 1.0)))
+#: The waist key-point must be this far from the hip line (share of the hip width) for the
+#: three to make a pelvis frame.
+PELVIS_TRIANGLE_MIN = 0.1
 
 
 def _human_frame(kp: Mapping[str, np.ndarray]) -> np.ndarray | None:
-    """Person's pelvis frames ``(T, 3, 3)``: y along the hips, z towards the neck."""
-    if not all(k in kp for k in ("left_hip", "right_hip", "waist", "neck")):
+    """Person's pelvis frames ``(T, 3, 3)``: y along the hips, z from their midpoint to the waist.
+
+    ``None`` without the waist and hips, or when the waist lies on the hip line (a key-point map
+    whose waist is the hips' midpoint has no pelvis orientation).
+    """
+    if not all(k in kp for k in ("left_hip", "right_hip", "waist")):
         return None
     y = kp["left_hip"] - kp["right_hip"]
-    up = kp["neck"] - kp["waist"]
+    up = kp["waist"] - 0.5 * (kp["left_hip"] + kp["right_hip"])
+    width = np.linalg.norm(y, axis=1)
+    off = np.linalg.norm(np.cross(y, up), axis=1) / np.maximum(width, 1e-12)
+    if not float(np.nanmedian(off / np.maximum(width, 1e-12))) >= PELVIS_TRIANGLE_MIN:
+        return None
     x = np.cross(y, up)
     x /= np.linalg.norm(x, axis=1, keepdims=True)
-    z = up / np.linalg.norm(up, axis=1, keepdims=True)
-    y = np.cross(z, x)
+    y = y / width[:, None]
+    z = np.cross(x, y)
     return np.stack([x, y, z], axis=2)
+
+
+def pelvis_lean(R: np.ndarray) -> np.ndarray:
+    r"""Lean of a body since its first sample, forward and sideways [deg], ``(T, 2)``.
+
+    With :math:`\Delta R(t) = R(t) R(0)^\top` (the body's rotation since the first sample, the
+    same for every frame fixed to it) and :math:`u = \Delta R(t)\,e_z` (where the direction
+    that was vertical points now), the lean is
+    :math:`(\operatorname{atan2}(u \cdot h_x, u_z), \operatorname{atan2}(u \cdot h_y, u_z))`
+    in the body's current heading frame :math:`h` (its x axis's yaw): positive forward and
+    to the left.
+    """
+    u = np.einsum("tij,j->ti", R @ R[0].T, np.array([0.0, 0.0, 1.0]))
+    psi = _yaw(R[:, :, 0])
+    c, s_ = np.cos(psi), np.sin(psi)
+    fwd = c * u[:, 0] + s_ * u[:, 1]
+    side = -s_ * u[:, 0] + c * u[:, 1]
+    return np.degrees(np.stack([np.arctan2(fwd, u[:, 2]), np.arctan2(side, u[:, 2])], axis=1))
 
 
 def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dict[str, Any]:
@@ -312,9 +343,13 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
     }
     Rh = _human_frame(kp)
     if Rh is not None:
-        tilt_h, tilt_r = _tilt(Rh), _tilt(rs.pelvis_R)
-        dtilt = (tilt_r - tilt_r[0]) - (tilt_h - tilt_h[0])
-        out["pelvis_tilt_error_deg"] = {"max": float(np.nanmax(np.abs(dtilt)))}
+        lean = np.linalg.norm(pelvis_lean(rs.pelvis_R) - pelvis_lean(Rh), axis=1)
+        worst = int(np.nanargmax(lean))
+        out["pelvis_tilt_error_deg"] = {
+            "max": float(lean[worst]),
+            "rms": float(np.sqrt(np.nanmean(lean**2))),
+            "at_s": float(t[worst] - t[0]),
+        }
 
     # Feet.
     h_r: dict[str, np.ndarray] = {}
@@ -445,7 +480,11 @@ def format_human_metrics(m: Mapping[str, Any]) -> list[str]:
         f"  pelvis height   error max {ph['max'] * 100:.1f} cm, RMS {ph['rms'] * 100:.1f} cm",
     ]
     if "pelvis_tilt_error_deg" in m:
-        lines.append(f"  pelvis tilt     error max {m['pelvis_tilt_error_deg']['max']:.1f} deg")
+        tilt = m["pelvis_tilt_error_deg"]
+        lines.append(
+            f"  pelvis tilt     error max {tilt['max']:.1f} deg (at {tilt['at_s']:.2f} s), "
+            f"RMS {tilt['rms']:.1f} deg"
+        )
     if "steps" in m:
         st = m["steps_total"]
         sw = m["swing_height_ratio"]

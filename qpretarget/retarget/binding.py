@@ -145,15 +145,25 @@ class RobotBinding:
         rots: Mapping[str, np.ndarray],
         missing: Mapping[str, bool],
         first: dict[str, tuple[np.ndarray | None, np.ndarray | None]] | None = None,
+        start: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
     ) -> None:
         """Write the targets of the bound tasks into ``targets`` (see the module docstring).
 
+        ``reference``: each task's pose at the robot's reference posture, :math:`R_{ref}` of
+        the module docstring. ``start``: the pose the start ramp begins from (default:
+        ``reference``; the person's first-sample stance when the run starts there). They are
+        not the same: a person whose pelvis is pitched 21 deg at the first sample (CMU 49_18)
+        gets a robot pelvis pitched 21 deg at the start, and taking that pose as
+        :math:`R_{ref}` too applied the person's pitch twice (the robot's pelvis 20 deg forward
+        of the person's through the whole clip).
+
         A pose task whose orientation (or position) is missing keeps tracking the other half;
         a missing half keeps its last target. With ``first`` (a dict filled on the first call),
-        the start ramp blends out the offset between the reference pose and the first target
+        the start ramp blends out the offset between the start pose and the first target
         instead of the target itself: the person's motion is followed from the first sample
         (a clip that starts walking keeps its first steps' travel).
         """
+        start = reference if start is None else start
         cal = calibration
         orient: dict[str, np.ndarray] = {}
         for name in {b.orientation for b in self.spec.tasks.values() if b.orientation}:
@@ -164,7 +174,8 @@ class RobotBinding:
         for name, b in self.spec.tasks.items():
             if name in skipped:
                 continue
-            p_ref, R_ref = reference[name]
+            R_ref = reference[name][1]
+            p_s, R_s = start[name]
             R_t = None
             if b.orientation is not None:
                 Rh = orient.get(b.orientation)
@@ -175,9 +186,9 @@ class RobotBinding:
                     if first is not None:
                         R0 = first.setdefault(name, (None, R_t.copy()))[1]
                         if ramp < 1.0 and R0 is not None:
-                            R_t = pin.exp3((1.0 - ramp) * pin.log3(R_ref @ R0.T)) @ R_t
+                            R_t = pin.exp3((1.0 - ramp) * pin.log3(R_s @ R0.T)) @ R_t
                     elif ramp < 1.0:
-                        R_t = R_ref @ pin.exp3(ramp * pin.log3(R_ref.T @ R_t))
+                        R_t = R_s @ pin.exp3(ramp * pin.log3(R_s.T @ R_t))
             p_t = None
             if b.keypoint is not None:
                 k = b.keypoint
@@ -199,9 +210,9 @@ class RobotBinding:
                         else:
                             p0 = entry[0]
                         if ramp < 1.0 and p0 is not None:
-                            p_t = p_t + (1.0 - ramp) * (p_ref - p0)
+                            p_t = p_t + (1.0 - ramp) * (p_s - p0)
                     elif ramp < 1.0:
-                        p_t = p_ref + ramp * (p_t - p_ref)
+                        p_t = p_s + ramp * (p_t - p_s)
             p_ok = p_t is not None and bool(np.all(np.isfinite(p_t)))
             R_ok = R_t is not None and bool(np.all(np.isfinite(R_t)))
             if p_ok and R_ok and R_t is not None and p_t is not None:

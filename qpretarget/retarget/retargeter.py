@@ -450,6 +450,9 @@ class Retargeter:
         self._foot_targets: FootTargets | None = None
         #: Last time the person was in flight [s].
         self._flight_t = -math.inf
+        if self.stepper is not None and self.support is not None:
+            for fb in self.support.feet.values():  # a run may follow one that ended in flight
+                ctrl.set_weight_scale(fb.task, 1.0)
         self._feet_warned = False
         #: Feet standing at the run's first tick (the initial stance may start on one foot).
         self._initial_standing: tuple[str, ...] = SIDES
@@ -458,7 +461,10 @@ class Retargeter:
         if self.support is not None:
             ctrl.set_contacts([fb.contact for fb in self.support.feet.values()])
         self._t_first: float | None = t0
-        self._targets_ref = {n: (p.copy(), R.copy()) for n, (p, R) in self.task_reference.items()}
+        #: Task poses the start ramp begins from: the reference posture's, or the person's
+        #: first-sample stance (:meth:`_initial_stance`); the targets stay relative to the
+        #: reference posture's (:meth:`RobotBinding.task_targets`).
+        self._ramp_start = {n: (p.copy(), R.copy()) for n, (p, R) in self.task_reference.items()}
 
     def _calibrate(self, samples: list[tuple[float, np.ndarray]]) -> None:
         stream = self._require_stream()
@@ -546,8 +552,9 @@ class Retargeter:
         def targets(w: float) -> dict[str, Any]:
             out: dict[str, Any] = {}
             self.binding.task_targets(
-                out, cal, self._targets_ref, w, self._skipped, scaled, kp, rots, missing, None
-            )
+                out, cal, self.task_reference, w, self._skipped, scaled, kp, rots, missing,
+                None, self._ramp_start,
+            )  # fmt: skip
             for side, sole in soles.items():
                 M = blend_pose(feet.sole_ref[side], sole, w) * feet.sole_to_task[side]
                 out[self._sup.feet[side].task] = M.homogeneous
@@ -576,12 +583,12 @@ class Retargeter:
         if "waist" in self.robot_map.keypoints:
             waist = self.com_estimate.robot_point("waist", ctrl.state.data)
             self._rooting.waist_height = float(waist[2])
-        self._targets_ref = {
+        self._ramp_start = {
             n: (p.copy(), R.copy())
             for n, (p, R) in (
                 (n, cast(FrameTask, t).current_pose(ctrl.state))
                 for n, t in ctrl.tasks.items()
-                if n in self._targets_ref
+                if n in self._ramp_start
             )
         }
 
@@ -655,8 +662,9 @@ class Retargeter:
         first = self._first_targets if self.stepper is not None else None
         ramp = self._ramp(t)
         self.binding.task_targets(
-            targets, cal, self._targets_ref, ramp, self._skipped, scaled, kp, rots, missing, first
-        )
+            targets, cal, self.task_reference, ramp, self._skipped, scaled, kp, rots, missing,
+            first, self._ramp_start,
+        )  # fmt: skip
         if seq is not None and self._sup.com_task is not None:
             com_task = cast(ComTask, ctrl.tasks[self._sup.com_task])
             full = np.array(com_task.target, dtype=float)
@@ -793,10 +801,45 @@ class Retargeter:
                 ft.lifted(side, soles[side])
         if cmd.switched:
             ctrl.set_contacts([self._sup.feet[s].contact for s in cmd.contacts])
+        self._swing_weights(cmd, stepper.ground)
         self._con.clear_anchor_steps()
         for side, anchor in cmd.anchors.items():
             self._con.set_anchor(self._sup.feet[side].contact, anchor, moving=side in cmd.pivoting)
         return cmd
+
+    def _swing_weights(self, cmd: StepCommand, ground: float) -> None:
+        r"""Swing soles' task weights from their height (``flight_foot_weight`` and so on).
+
+        The ``stepping`` settings ``flight_foot_weight`` and ``swing_orientation_weight``.
+        With :math:`h` the sole target's height over the ``ground`` and
+        :math:`r = \mathrm{clip}((h - 0.05) / 0.05, 0, 1)` (0 up to 5 cm, 1 from 10 cm), a swing
+        sole's orientation rows are weighted :math:`1 - (1 - f_o) r` and, in the person's
+        flight, all its rows :math:`1 - (1 - f_f) r` more; stance soles and soles near the
+        floor (lift-off, landing) keep their full weights. Each factor changes by at most
+        ``dt / lift_time`` a tick (no step in the QP's solution).
+        """
+        st = self._sup.stepping
+        f_f, f_o = st.flight_foot_weight, st.swing_orientation_weight
+        if f_f >= 1.0 and f_o >= 1.0:
+            return
+        rate = self.dt / st.lift_time
+        for side, fb in self._sup.feet.items():
+            task = cast(FrameTask, self.controller.tasks[fb.task])
+            pos = np.ones(3 if task.has_position else 0)
+            ori = np.ones(3 if task.has_orientation else 0)
+            sole = cmd.feet.get(side)
+            if cmd.states.get(side) == "swing" and sole is not None:
+                r = min(1.0, max(0.0, (float(sole.translation[2]) - ground - 0.05) / 0.05))
+                ori[:] = 1.0 - (1.0 - f_o) * r
+                if self.detector.flight:
+                    flight = 1.0 - (1.0 - f_f) * r
+                    pos *= flight
+                    ori *= flight
+            goal = np.concatenate([pos, ori])
+            now = np.broadcast_to(task.weight_scale, goal.shape)
+            if not np.array_equal(goal, now):
+                step = np.clip(goal - now, -rate, rate)
+                self.controller.set_weight_scale(fb.task, now + step)
 
     def _ramp(self, t: float) -> float:
         """Start ramp weight: minimum-jerk from 0 to 1 over ``calibration.ramp_time``."""

@@ -125,6 +125,17 @@ class StepSettings:
             metrics) instead of the person's stride from the robot's standing foot. A landing
             that falls short (a kick pulls the pelvis back) is then not carried into every later
             step (:meth:`~qpretarget.retarget.feet.FootTargets.place`).
+        flight_foot_weight: In the person's flight, a swing sole's task weight times this once
+            the sole's target is 10 cm over the ground (full weight up to 5 cm, linear
+            between; changed at most ``1 / lift_time`` per second). With nothing on the ground
+            the floating base is the cheapest way to move a foot: at full weight the soles,
+            weighted 10-100 times the pelvis, moved the whole body (a split leap's pelvis
+            17 cm over the person's, a tuck jump's 6-10 cm under it).
+        swing_orientation_weight: A swing sole's orientation rows weighted times this once the
+            sole's target is 10 cm over the ground (full weight up to 5 cm, linear between,
+            changed at most ``1 / lift_time`` per second): a sole high in the air need not be
+            flat or turned exactly, and where its ankle is at a limit (a leg raised high with
+            the body leaning back) a fully weighted sole orientation turned the pelvis instead.
     """
 
     clearance: float = 0.02
@@ -149,6 +160,8 @@ class StepSettings:
     tiptoe_accel: float = 200.0
     restep: float = 0.05
     absolute: bool = True
+    flight_foot_weight: float = 0.1
+    swing_orientation_weight: float = 0.1
 
     def __post_init__(self) -> None:
         """Validate.
@@ -163,6 +176,12 @@ class StepSettings:
                     raise ValueError(f"{name} must be true or false, got {value!r}")
             else:
                 _positive(value, name)
+        for name in ("flight_foot_weight", "swing_orientation_weight"):
+            if getattr(self, name) > 1.0:
+                raise ValueError(
+                    f"{name} is a factor on the sole's weight in (0, 1], got "
+                    f"{getattr(self, name)!r}"
+                )
 
 
 @dataclass

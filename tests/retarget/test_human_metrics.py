@@ -13,6 +13,7 @@ from qpretarget.analysis.human_metrics import (
     HumanMetricsError,
     human_metrics,
     intervals,
+    pelvis_lean,
     robot_leg_length,
 )
 from qpretarget.robot import load_robot
@@ -24,12 +25,21 @@ def g1():
     return load_robot("g1")
 
 
-def _run(robot, *, turn_robot: float, turn_human: float, lift: float) -> RobotTrajectory:
+def _run(
+    robot,
+    *,
+    turn_robot: float,
+    turn_human: float,
+    lift: float,
+    lean_robot: float = 0.0,
+    lean_human: float = 0.0,
+) -> RobotTrajectory:
     """A synthetic 2 s run: the robot's root walks 1 m along x and turns by ``turn_robot``.
 
     The "person" is the robot's own key-frames (so the leg-length ratio is exactly 1), its root
     turning by ``turn_human``; the robot's left sole rises by ``lift`` between 0.5 and 1.0 s while
-    the person's left ankle does not move up.
+    the person's left ankle does not move up. The roots pitch forward by ``lean_robot`` and
+    ``lean_human`` [rad] over the run (about their own y axis), like the turns.
     """
     t = np.arange(0.0, 2.0, 0.01)
     q0 = robot.q_reference.copy()
@@ -38,12 +48,16 @@ def _run(robot, *, turn_robot: float, turn_human: float, lift: float) -> RobotTr
     human: dict[str, list[np.ndarray]] = {}
     kf = robot.keyframes
     for k, tk in enumerate(t):
-        for turn, who in ((turn_robot, "robot"), (turn_human, "human")):
+        for turn, lean, who in (
+            (turn_robot, lean_robot, "robot"),
+            (turn_human, lean_human, "human"),
+        ):
             qk = q0.copy()
             qk[0] += 0.5 * tk
             R = (
                 pin.utils.rpyToMatrix(0.0, 0.0, turn * tk / 2.0)
                 @ pin.Quaternion(q0[3:7]).toRotationMatrix()
+                @ pin.utils.rpyToMatrix(0.0, lean * tk / 2.0, 0.0)
             )
             qk[3:7] = pin.Quaternion(R).coeffs()
             if who == "robot":
@@ -87,7 +101,35 @@ def test_same_motion_scores_perfectly(g1):
     assert m["heading_error_deg"]["max"] < 1e-6
     assert m["pelvis_height_error_m"]["max"] < 1e-9
     assert m["ankle_displacement_error_legs"]["rms"] < 1e-9
+    assert m["pelvis_tilt_error_deg"]["max"] < 1e-6
     assert m["held_ticks"] == 0
+
+
+def test_pelvis_lean_compares_directions_not_magnitudes(g1):
+    # Both turning 0.5 rad; the robot's root pitches forward by 0.2 rad over the run, the
+    # person's (its waist-and-hips triangle) back by 0.2 rad: equal tilts from the vertical,
+    # opposite leans. The error is their distance, 2 x 0.2 x 1.99 / 2 rad = 22.8 deg at the last
+    # sample (0.1 deg: atan2 of the lean components vs the angle itself, both small).
+    m = human_metrics(_run(g1, turn_robot=0.5, turn_human=0.5, lift=0.0, lean_robot=0.2,
+                           lean_human=-0.2), g1)  # fmt: skip
+    assert m["pelvis_tilt_error_deg"]["max"] == pytest.approx(math.degrees(0.398), abs=0.1)
+    assert m["pelvis_tilt_error_deg"]["at_s"] == pytest.approx(1.99, abs=1e-9)
+    # The same lean in both: no error, whatever the heading (the lean is in each body's own
+    # heading frame; 1e-6 deg: round-off).
+    m = human_metrics(_run(g1, turn_robot=0.5, turn_human=0.5, lift=0.0, lean_robot=0.2,
+                           lean_human=0.2), g1)  # fmt: skip
+    assert m["pelvis_tilt_error_deg"]["max"] < 1e-6
+
+
+def test_pelvis_lean_of_a_turn_is_zero_and_a_pitch_is_forward():
+    psi = np.linspace(0.0, 3.0, 7)
+    R = np.array([pin.utils.rpyToMatrix(0.0, 0.0, a) for a in psi])
+    assert np.abs(pelvis_lean(R)).max() < 1e-9  # a turn about the vertical is no lean
+    # Turned 1 rad, then pitched 0.3 rad about its own y axis: 0.3 rad forward, none sideways.
+    R = np.array(
+        [np.eye(3), pin.utils.rpyToMatrix(0.0, 0.0, 1.0) @ pin.utils.rpyToMatrix(0, 0.3, 0)]
+    )
+    assert pelvis_lean(R)[1] == pytest.approx([math.degrees(0.3), 0.0], abs=1e-9)
 
 
 def test_heading_and_lift_errors_are_measured(g1):
@@ -107,3 +149,13 @@ def test_run_without_person_is_refused(g1):
     run.human = {}
     with pytest.raises(HumanMetricsError, match="no human key-points"):
         human_metrics(run, g1)
+
+
+def test_no_pelvis_tilt_without_a_pelvis_triangle(g1):
+    # A key-point map whose waist is the hips' midpoint has no pelvis orientation: the tilt
+    # error is left out rather than computed from a degenerate frame.
+    run = _run(g1, turn_robot=0.0, turn_human=0.0, lift=0.0)
+    run.human["waist"] = 0.5 * (run.human["left_hip"] + run.human["right_hip"])
+    m = human_metrics(run, g1)
+    assert "pelvis_tilt_error_deg" not in m
+    assert m["held_ticks"] == 0
