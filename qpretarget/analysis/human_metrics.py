@@ -49,7 +49,8 @@ with :math:`w_h` the person's waist key-point, :math:`w_r` the robot's pelvis fr
   distance between the robot's and the person's (forward, sideways) leans, so a robot leaning
   forward while the person leans back counts both. The person's pelvis is the rigid triangle
   of the waist and hip key-points (the BVH root and the thigh joints it carries), the robot's
-  its pelvis frame;
+  its pelvis frame; only over the samples where those key-points are observed
+  (:func:`observed`: not filled in across a gap over 0.1 s), from the first of them;
 * *stance slip*: for each stance of a robot foot (touch-down to lift-off: its ``contacts`` column,
   else the sole lower than 5 mm), the largest horizontal distance of the sole from where it
   touched down, the largest over stances [mm] (horizontal, as ``foot_slip`` of
@@ -239,6 +240,32 @@ def _human_frame(kp: Mapping[str, np.ndarray]) -> np.ndarray | None:
     return np.stack([x, y, z], axis=2)
 
 
+#: A key-point is *observed* at a sample between two of its recorded samples at most this far
+#: apart [s] (a longer gap, or before its first and after its last record, is filled in).
+OBSERVED_GAP = 0.1
+
+
+def observed(
+    t: np.ndarray, tp: np.ndarray, x: np.ndarray, max_gap: float = OBSERVED_GAP
+) -> np.ndarray:
+    """Samples ``t`` at which ``(N, 3)`` records ``x`` at ``tp`` are observed (bool mask).
+
+    Between two finite records at most ``max_gap`` apart (or on one): not before the first
+    record, after the last, or inside a longer gap, where :func:`_interp` holds or bridges.
+    """
+    ok = np.all(np.isfinite(x), axis=1)
+    tv = tp[ok]
+    out = np.zeros(len(t), dtype=bool)
+    if len(tv) == 0:
+        return out
+    i = np.searchsorted(tv, t)
+    exact = (i < len(tv)) & (tv[np.minimum(i, len(tv) - 1)] == t)
+    inside = (i > 0) & (i < len(tv))
+    gap = np.full(len(t), np.inf)
+    gap[inside] = tv[i[inside]] - tv[i[inside] - 1]
+    return exact | (inside & (gap <= max_gap + 1e-12))
+
+
 def pelvis_lean(R: np.ndarray) -> np.ndarray:
     r"""Lean of a body since its first sample, forward and sideways [deg], ``(T, 2)``.
 
@@ -342,13 +369,22 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
         "rms": float(np.sqrt(np.nanmean(dz**2))),
     }
     Rh = _human_frame(kp)
-    if Rh is not None:
-        lean = np.linalg.norm(pelvis_lean(rs.pelvis_R) - pelvis_lean(Rh), axis=1)
+    # The lean only where the person's pelvis is observed (marker data has gaps: CMU BVH none,
+    # the OpenSim C3D walk its waist and hips for 1.5-3.5 s of 5 s only, held before and after
+    # by the interpolation), from the first such sample.
+    seen = np.ones(T, dtype=bool)
+    for k in ("waist", "left_hip", "right_hip"):
+        if k in human:
+            seen &= observed(t, th, np.asarray(human[k], float).reshape(len(th), 3))
+    if Rh is not None and int(seen.sum()) >= 2:
+        idx = np.flatnonzero(seen)
+        lean = np.linalg.norm(pelvis_lean(rs.pelvis_R[idx]) - pelvis_lean(Rh[idx]), axis=1)
         worst = int(np.nanargmax(lean))
         out["pelvis_tilt_error_deg"] = {
             "max": float(lean[worst]),
             "rms": float(np.sqrt(np.nanmean(lean**2))),
-            "at_s": float(t[worst] - t[0]),
+            "at_s": float(t[idx[worst]] - t[0]),
+            "observed_share": float(len(idx) / T),
         }
 
     # Feet.
@@ -481,9 +517,15 @@ def format_human_metrics(m: Mapping[str, Any]) -> list[str]:
     ]
     if "pelvis_tilt_error_deg" in m:
         tilt = m["pelvis_tilt_error_deg"]
+        seen = tilt.get("observed_share", 1.0)
         lines.append(
             f"  pelvis tilt     error max {tilt['max']:.1f} deg (at {tilt['at_s']:.2f} s), "
             f"RMS {tilt['rms']:.1f} deg"
+            + (
+                ""
+                if seen >= 0.999
+                else f" over the {100 * seen:.0f} % of samples the pelvis is seen"
+            )
         )
     if "steps" in m:
         st = m["steps_total"]

@@ -13,6 +13,7 @@ from qpretarget.analysis.human_metrics import (
     HumanMetricsError,
     human_metrics,
     intervals,
+    observed,
     pelvis_lean,
     robot_leg_length,
 )
@@ -159,3 +160,24 @@ def test_no_pelvis_tilt_without_a_pelvis_triangle(g1):
     m = human_metrics(run, g1)
     assert "pelvis_tilt_error_deg" not in m
     assert m["held_ticks"] == 0
+
+
+def test_observed_marks_recorded_samples_and_short_gaps_only():
+    tp = np.arange(10) * 0.05  # records every 50 ms ...
+    x = np.zeros((10, 3))
+    x[4:7] = np.nan  # ... with a 200 ms gap (0.15 -> 0.35 s)
+    t = np.array([-0.01, 0.0, 0.025, 0.2, 0.4, 0.45, 0.46])
+    # Before the first record, inside the long gap and after the last: not observed.
+    assert observed(t, tp, x).tolist() == [False, True, True, False, True, True, False]
+
+
+def test_pelvis_tilt_is_measured_where_the_pelvis_is_seen(g1):
+    # Marker data with the pelvis unseen for the first 0.5 s (held by the interpolation there):
+    # the lean is measured from the first sample the pelvis is seen, over the rest only.
+    run = _run(g1, turn_robot=0.5, turn_human=0.5, lift=0.0, lean_robot=0.2, lean_human=0.2)
+    for k in ("waist", "left_hip", "right_hip"):
+        run.human[k][:50] = np.nan
+    m = human_metrics(run, g1)
+    tilt = m["pelvis_tilt_error_deg"]
+    assert tilt["observed_share"] == pytest.approx(150 / 200)
+    assert tilt["max"] < 1e-6  # same lean from there on (1e-6 deg: round-off)
