@@ -17,6 +17,10 @@ over the first 10 samples) and aligned at the first sample on the root position 
 with :math:`w_h` the person's waist key-point, :math:`w_r` the robot's pelvis frame and
 :math:`\psi` the headings (robot: the pelvis frame's x axis; person: the normal of the hip line).
 
+**Observed span.** Everything is measured over the span from the first to the last sample at
+which the person's waist and hips are :func:`observed` (marker data starting or ending with
+gaps is held there by the interpolation), aligned at its first sample (``observed_span_s``).
+
 **Measures** (``T`` samples, ``dt`` the sample period):
 
 * *root travel ratio*: horizontal path length of the robot pelvis over the scaled human's, both
@@ -62,6 +66,7 @@ with :math:`w_h` the person's waist key-point, :math:`w_r` the robot's pelvis fr
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -284,6 +289,49 @@ def pelvis_lean(R: np.ndarray) -> np.ndarray:
     return np.degrees(np.stack([np.arctan2(fwd, u[:, 2]), np.arctan2(side, u[:, 2])], axis=1))
 
 
+def _observed_span(
+    traj: RobotTrajectory, th: np.ndarray, human: Mapping[str, Any]
+) -> tuple[RobotTrajectory, list[float] | None]:
+    """The run cut to the span where the person's waist and hips are observed.
+
+    Before the first and after the last sample at which all three are :func:`observed` the
+    person's root is only held by the interpolation (marker data that starts or ends with
+    gaps): nothing there is compared. Returns the run unchanged and ``None`` when the span is
+    the whole run.
+
+    Raises:
+        HumanMetricsError: They are observed at fewer than 2 samples.
+    """
+    t = np.asarray(traj.t, float)
+    seen = np.ones(len(t), dtype=bool)
+    for k in ("waist", "left_hip", "right_hip"):
+        if k in human:
+            seen &= observed(t, th, np.asarray(human[k], float).reshape(len(th), 3))
+    if seen.all():
+        return traj, None
+    idx = np.flatnonzero(seen)
+    if len(idx) < 2:
+        raise HumanMetricsError(
+            "the person's waist and hips are observed at fewer than 2 samples of the run "
+            "(marker gaps longer than 0.1 s everywhere): nothing to compare the robot with."
+        )
+    a, b = int(idx[0]), int(idx[-1]) + 1
+    T = len(t)
+
+    def cut(x: Any) -> Any:
+        return x[a:b] if isinstance(x, np.ndarray) and x.ndim >= 1 and len(x) == T else x
+
+    cropped = dataclasses.replace(
+        traj,
+        t=t[a:b], q=cut(np.asarray(traj.q)), v=cut(np.asarray(traj.v)),
+        contacts=cut(traj.contacts), status=cut(traj.status), solve_time=cut(traj.solve_time),
+        tau=cut(traj.tau), targets={k: cut(v) for k, v in traj.targets.items()},
+        actual={k: cut(v) for k, v in traj.actual.items()},
+        extra={k: cut(v) for k, v in traj.extra.items()},
+    )  # fmt: skip
+    return cropped, [float(t[a]), float(t[b - 1])]
+
+
 def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dict[str, Any]:
     """The human-referenced metrics of a run (see the module docstring).
 
@@ -307,11 +355,12 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
             "the run has no human key-points (human/t, human/waist): it was not written by "
             "qpretarget retarget, or with an old version; retarget the clip again."
         )
+    th = np.asarray(human["t"], float)
+    traj, span = _observed_span(traj, th, human)
     t = np.asarray(traj.t, float)
     T = len(t)
     if T < 2:
         raise HumanMetricsError(f"the run has {T} sample(s); the metrics need at least 2.")
-    th = np.asarray(human["t"], float)
     kp = {
         k: _interp(t, th, np.asarray(v, float).reshape(len(th), 3))
         for k, v in human.items()
@@ -348,6 +397,8 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
         return (s * (p - w0)) @ Rz.T + rs.pelvis[0]
 
     out: dict[str, Any] = {"leg_length_ratio": s, "robot_leg_length_m": L_r}
+    if span is not None:
+        out["observed_span_s"] = span
     waist = scaled(kp["waist"])
     human_path = _path(waist[:, :2], t)
     robot_path = _path(rs.pelvis[:, :2], t)

@@ -173,11 +173,24 @@ def test_observed_marks_recorded_samples_and_short_gaps_only():
 
 def test_pelvis_tilt_is_measured_where_the_pelvis_is_seen(g1):
     # Marker data with the pelvis unseen for the first 0.5 s (held by the interpolation there):
-    # the lean is measured from the first sample the pelvis is seen, over the rest only.
+    # the run is measured from the first sample the pelvis is seen.
     run = _run(g1, turn_robot=0.5, turn_human=0.5, lift=0.0, lean_robot=0.2, lean_human=0.2)
     for k in ("waist", "left_hip", "right_hip"):
         run.human[k][:50] = np.nan
     m = human_metrics(run, g1)
     tilt = m["pelvis_tilt_error_deg"]
-    assert tilt["observed_share"] == pytest.approx(150 / 200)
+    assert tilt["observed_share"] == 1.0  # of the observed span: the run is cut to it
     assert tilt["max"] < 1e-6  # same lean from there on (1e-6 deg: round-off)
+    # Every measure is taken over that span, aligned at its first sample: the same motion
+    # scores perfectly (1e-9: FK and interpolation), the held values are not compared.
+    assert m["observed_span_s"] == pytest.approx([0.5, 1.99])
+    assert m["heading_error_deg"]["max"] < 1e-6
+    assert m["ankle_displacement_error_legs"]["rms"] < 1e-9
+    assert m["root_travel"]["ratio"] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_a_person_never_seen_is_one_clear_error(g1):
+    run = _run(g1, turn_robot=0.0, turn_human=0.0, lift=0.0)
+    run.human["waist"][:] = np.nan
+    with pytest.raises(HumanMetricsError, match="waist and hips are observed at fewer than 2"):
+        human_metrics(run, g1)
