@@ -289,6 +289,15 @@ def pelvis_lean(R: np.ndarray) -> np.ndarray:
     return np.degrees(np.stack([np.arctan2(fwd, u[:, 2]), np.arctan2(side, u[:, 2])], axis=1))
 
 
+def _root_observed(t: np.ndarray, th: np.ndarray, human: Mapping[str, Any]) -> np.ndarray:
+    """Samples ``t`` at which the person's waist and both hips are all :func:`observed`."""
+    seen = np.ones(len(t), dtype=bool)
+    for k in ("waist", "left_hip", "right_hip"):
+        if k in human:
+            seen &= observed(t, th, np.asarray(human[k], float).reshape(len(th), 3))
+    return seen
+
+
 def _observed_span(
     traj: RobotTrajectory, th: np.ndarray, human: Mapping[str, Any]
 ) -> tuple[RobotTrajectory, list[float] | None]:
@@ -303,10 +312,7 @@ def _observed_span(
         HumanMetricsError: They are observed at fewer than 2 samples.
     """
     t = np.asarray(traj.t, float)
-    seen = np.ones(len(t), dtype=bool)
-    for k in ("waist", "left_hip", "right_hip"):
-        if k in human:
-            seen &= observed(t, th, np.asarray(human[k], float).reshape(len(th), 3))
+    seen = _root_observed(t, th, human)
     if seen.all():
         return traj, None
     idx = np.flatnonzero(seen)
@@ -423,10 +429,7 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
     # The lean only where the person's pelvis is observed (marker data has gaps: CMU BVH none,
     # the OpenSim C3D walk its waist and hips for 1.5-3.5 s of 5 s only, held before and after
     # by the interpolation), from the first such sample.
-    seen = np.ones(T, dtype=bool)
-    for k in ("waist", "left_hip", "right_hip"):
-        if k in human:
-            seen &= observed(t, th, np.asarray(human[k], float).reshape(len(th), 3))
+    seen = _root_observed(t, th, human)
     if Rh is not None and int(seen.sum()) >= 2:
         idx = np.flatnonzero(seen)
         lean = np.linalg.norm(pelvis_lean(rs.pelvis_R[idx]) - pelvis_lean(Rh[idx]), axis=1)

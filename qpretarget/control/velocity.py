@@ -191,7 +191,7 @@ class VelocityLevel(Level):
         # What the first solve relaxed stays relaxed: the fallback widened this tick's box in
         # place (RelaxationFallback.solve), so a corrector solve inside that box succeeds
         # without reporting it (an acceleration limit 0.09 rad/s over on an "ok" tick).
-        first = dict(out.relaxed)
+        first: dict[str, float] | None = None
         for _ in range(n_max):
             changed = False
             for con, rows in self.refiners:
@@ -201,6 +201,8 @@ class VelocityLevel(Level):
                     changed = True
             if not changed:
                 return
+            if first is None:  # copied on a corrector solve only, not every tick
+                first = dict(out.relaxed)
             ts = time.perf_counter()
             x, res, relaxed, q_next = self._solve_once(tp)
             self.timings["solve"] += res.solve_time
