@@ -130,6 +130,12 @@ class CalibrationConfig:
         centre_symmetric: one offset for each left/right pair of articulations (with
             ``centre_axes: limb``): a person's left and right joint centres sit alike, and
             each side's frames then inform both.
+        centre_cuts: where a limb's surface is cut into segments once its centres are moved
+            at calibration (``centre_model: anthropometric``): ``centres`` (default) cuts at
+            the person's centres, the points between the robot's link boundary and the
+            person's centre moving to the segment on their side
+            (:meth:`~qpretarget.cloud.template.Template.assign_by_centres`); ``links``
+            keeps the robot's link boundaries (before this option).
     """
 
     enabled: bool = True
@@ -152,6 +158,7 @@ class CalibrationConfig:
     centre_rate: float | None = 10.0
     centre_model: str = "robot"
     centre_symmetric: bool = False
+    centre_cuts: str = "centres"
 
 
 @dataclass
@@ -299,6 +306,7 @@ _CHOICES = {
     ("em", "estep"): ("kdtree", "dense"),
     ("calibration", "centre_axes"): ("limb", "free"),
     ("calibration", "centre_model"): ("robot", "anthropometric"),
+    ("calibration", "centre_cuts"): ("centres", "links"),
     ("em", "prediction"): ("ar3", "velocity", "constant"),
     ("em", "temporal_reference"): ("previous", "prediction"),
     ("stability", "mode"): ("qp", "hip_offset", "none"),

@@ -723,6 +723,9 @@ class CloudRetargeter:
         # The frame's cloud normals when computed in the background (_prepare, _take_normals).
         self._normals_job: Callable[[], np.ndarray] | None = None
         self._frame_normals: np.ndarray | None = None
+        #: Template points moved to the segment on their side of a person's centre at the
+        #: calibration (``calibration.centre_cuts``).
+        self.recut_points = 0
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -1465,6 +1468,9 @@ class CloudRetargeter:
                 self._centre_mean = np.linalg.solve(U.T @ U, U.T @ full)
             self._centre_base = full - U @ self._centre_mean
             self._apply_centres(self._centre_mean)
+            if cal.centre_cuts == "centres":
+                # The limbs' surfaces cut at the person's centres, not the robot's links.
+                self.recut_points = T.assign_by_centres(q, reach=cal.centre_bound)
         self._centre_info = np.eye(nc) / max(cal.centre_prior, 1e-9) ** 2
         self.calibration_sigma2 = sigma2
         self.calibrated = True

@@ -597,6 +597,70 @@ class Template:
         self.set_scales(self.scales)
         return int(ok.sum())
 
+    def assign_by_centres(self, q: np.ndarray, *, reach: float = 0.15) -> int:
+        r"""Cut each limb's surface into segments at the moved joint centres.
+
+        The template's points belong to the joint of the robot's link they were sampled on
+        (personalised: of the nearest such point), so a limb's surface is cut where the
+        *robot's* links meet. Once an articulation's centre is moved to the person's
+        (:meth:`set_centres`; G1's elbows sit 8-9 cm up the arm from a person's), the points
+        between the two cuts ride on the wrong segment: bending the elbow moves part of the
+        upper arm's surface with the forearm.
+
+        At ``q`` (the centres' rest configuration, where moving a centre leaves the surface in
+        place), for each articulation :math:`a` with a moved centre :math:`c_a` and a parent
+        articulation :math:`b` up the same limb (not the trunk's: shoulders and hips are
+        left), with :math:`u = (c_a - c_b)/\|c_a - c_b\|` and a point's
+        :math:`s = u^\top (v_m - c_a)`, among the points within ``reach`` of :math:`c_a`
+        along :math:`u` and of the axis: a point of the parent segment with :math:`s > 0`
+        moves to the articulation's own joint, a point of the child segment with
+        :math:`s < 0` to the joint carrying the parent segment's last link. Its position and
+        normal at ``q`` stay (new local coordinates in its new joint's frame).
+
+        Returns:
+            The number of points moved to another joint.
+        """
+        posed = self.pose(q, jacobians=False)
+        w, nw, p, R = posed.points, posed.normals, posed.p, posed.R
+        par, art_of = self._parents, self._articulation_of_joint
+        seg = self.seg_of_joint
+        trunk = [k for k, n in enumerate(self.segment_names) if n in (ROOT_SEGMENT, "torso")]
+        joint = self.joint.copy()
+        for group in self.articulations:
+            own, low = int(max(group)), int(min(group))
+            above = int(par[low])  # carries the parent segment's last link
+            if np.linalg.norm(self.centre_offsets[own]) < 1e-3 or seg[above] in trunk:
+                continue
+            i = above
+            while i > 0 and art_of[i] < 0:
+                i = int(par[i])
+            if i <= 0:
+                continue
+            up = int(max(self.articulations[art_of[i]]))
+            u = p[own] - p[up]
+            u /= max(float(np.linalg.norm(u)), 1e-12)
+            d = w - p[own]
+            s = d @ u
+            radial = np.linalg.norm(d - s[:, None] * u, axis=1)
+            near = (np.abs(s) <= reach) & (radial <= reach)
+            joint[near & (s > 0) & (seg[self.joint] == seg[above])] = own
+            joint[near & (s < 0) & (seg[self.joint] == seg[own])] = above
+        moved = np.flatnonzero(joint != self.joint)
+        if len(moved) == 0:
+            return 0
+        j = joint[moved]
+        e_loc = np.einsum("kba,kb->ka", self._R0[j], self.centre_offsets[j])
+        local = np.einsum("kba,kb->ka", R[j], w[moved] - p[j])
+        self.points0[moved] = (local + e_loc) / self.scales[seg[j]][:, None]
+        self.normals0[moved] = np.einsum("kba,kb->ka", R[j], nw[moved])
+        self.joint = joint
+        order = np.argsort(self.joint, kind="stable")
+        self.points0, self.normals0 = self.points0[order], self.normals0[order]
+        self.joint, self.link = self.joint[order], self.link[order]
+        self.point_segment = self.seg_of_joint[self.joint]
+        self.set_scales(self.scales)
+        return len(moved)
+
     def frame_scale(self, frame_id: int) -> float:
         """Scale factor of the segment a frame belongs to."""
         return float(self.scales[self._frame_seg[frame_id]])

@@ -163,6 +163,54 @@ def test_joint_centre_offsets(g1, g1_meshes, posture):
     assert np.allclose(be, np.einsum("mac,ma->c", D, E), atol=1e-9)
 
 
+def test_limb_surfaces_cut_at_moved_centres(g1, g1_meshes):
+    """``assign_by_centres``: after moving the elbows down the arm (as a person's sit, 8-9 cm
+    below G1's), the points between G1's link boundary and the moved elbow belong to the upper
+    arm; the surface stays where it is at the rest pose (1e-12 m: the same positions and
+    normals re-expressed in another joint's frame), and a bent elbow moves only the points
+    beyond the moved centre.
+    """
+    T = Template(g1, n_points=2000, meshes=g1_meshes)
+    q = g1.q_reference.copy()
+    T.set_centre_rest(q)
+    names = [[T.model.names[int(j)] for j in g] for g in T.articulations]
+    axes, _ = T.limb_axes()
+    x = np.zeros((T.n_centres, 3))
+    for side in ("left", "right"):
+        a = names.index([f"{side}_elbow_joint"])
+        x[a] = 0.08 * axes[a]  # 8 cm down the arm
+    T.set_centres(x)
+    rest = T.pose(q, jacobians=False)
+    moved = T.assign_by_centres(q, reach=0.15)
+    assert moved > 20, moved
+    after = T.pose(q, jacobians=False)
+    # Same surface as a set (the points are re-sorted by joint).
+    key = np.lexsort(rest.points.T)
+    key2 = np.lexsort(after.points.T)
+    assert np.abs(rest.points[key] - after.points[key2]).max() < 1e-12
+    assert np.abs(rest.normals[key] - after.normals[key2]).max() < 1e-12
+    for side in ("left", "right"):
+        elbow = T.model.getJointId(f"{side}_elbow_joint")
+        shoulder = T.model.getJointId(f"{side}_shoulder_roll_joint")
+        u = after.p[elbow] - after.p[shoulder]
+        u /= np.linalg.norm(u)
+        s = (after.points - after.p[elbow]) @ u
+        near = np.linalg.norm(after.points - after.p[elbow], axis=1) < 0.1
+        upper = T.seg_of_joint[T.joint] == T.seg_of_joint[T.model.parents[elbow]]
+        fore = T.seg_of_joint[T.joint] == T.seg_of_joint[elbow]
+        # Every point near the elbow is on its segment's side of the moved centre.
+        assert np.all(s[near & upper] <= 1e-9) and np.all(s[near & fore] >= -1e-9)
+        assert (near & upper).sum() > 0 and (near & fore).sum() > 0
+        # Bending the elbow moves the forearm's points only.
+        qb = q.copy()
+        qb[T.model.joints[elbow].idx_q] += 0.5
+        bent = T.pose(qb, jacobians=False)
+        still = np.linalg.norm(bent.points - after.points, axis=1) < 1e-12
+        assert np.all(still[near & upper]) and not np.any(still[near & fore & (s > 0.01)])
+    # Nothing moved: nothing to cut (a second call finds every point on its side).
+    assert T.assign_by_centres(q, reach=0.15) == 0
+
+
 def test_posing_a_subset_is_the_same_rows(g1_template, posture):
     """A frame poses only its visible points (``index``): the same rows, the same M-step sums.
 
