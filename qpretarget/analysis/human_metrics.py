@@ -36,8 +36,10 @@ gaps is held there by the interpolation), aligned at its first sample (``observe
   frame 1-3 cm up;
 * *steps*: foot lifts, maximal intervals with a foot higher than 3 cm (gaps under 0.1 s merged),
   counted per foot, robot and person;
-* *swing-height ratio*: for each human lift higher than 5 cm, the robot foot's highest point
-  within the lift (widened by 0.2 s each side) over the person's;
+* *swing-height ratio*: for each human lift higher than 5 cm above where that foot stood
+  before it (its lowest height since its previous lift; the floor for a foot raised from the
+  first sample), the robot foot's highest point within the lift (widened by 0.2 s each side)
+  above where the robot's foot stood over the same span, over the person's;
 * *lift agreement*: share of the samples with a human foot higher than 3 cm in which the robot's
   same foot is off the ground;
 * *flight*: intervals with both feet higher than 3 cm (person) or off the ground (robot), and
@@ -501,13 +503,20 @@ def _feet_metrics(
         lifts_h = intervals(h_h[x] > LIFT_HEIGHT, t, merge=MERGE_GAP)
         lifts_r = intervals(h_r[x] > LIFT_HEIGHT, t, merge=MERGE_GAP)
         steps[x] = {"robot": len(lifts_r), "human": len(lifts_h)}
+        end = 0  # the previous lift's end: the foot stood from there to this lift
         for i, j in lifts_h:
-            peak = float(np.max(h_h[x][i:j]))
+            # Above where the foot stood before the lift (its lowest point since the previous
+            # lift): the person's floor is not level (standing ankles 6.2-8.5 cm high across the
+            # kata's capture volume). A foot raised from the first sample: above the floor.
+            base_h = float(np.nanmin(h_h[x][end : i + 1])) if i > 0 else 0.0
+            base_r = float(np.nanmin(h_r[x][end : i + 1])) if i > 0 else 0.0
+            end = j
+            peak = float(np.nanmax(h_h[x][i:j])) - base_h
             if peak < SWING_MIN:
                 continue
             lo = int(np.searchsorted(t, t[i] - SWING_WINDOW))
             hi = int(np.searchsorted(t, t[j - 1] + SWING_WINDOW, side="right"))
-            ratios.append(float(np.max(h_r[x][lo:hi])) / peak)
+            ratios.append((float(np.max(h_r[x][lo:hi])) - base_r) / peak)
         lifted = h_h[x] > LIFT_HEIGHT
         agree_den += int(lifted.sum())
         agree_num += int(np.sum(lifted & (low_r[x] > OFF_GROUND)))

@@ -145,6 +145,26 @@ def test_heading_and_lift_errors_are_measured(g1):
     assert m["flight"]["robot"] == 1
 
 
+def test_swing_height_is_taken_above_where_the_foot_stood(g1):
+    """The swing-height ratio compares each lift above where that foot stood before it.
+
+    The person's left ankle rises 8 cm for 0.5 s; later both ankles stand 2 cm lower (a floor
+    that is not level: on the kata the standing ankles are 6.2-8.5 cm high across the capture
+    volume), so the clip's lowest point puts the lifted foot's stance 2 cm up and its peak at
+    10 cm. The robot's sole rises 8 cm at the same time: ratio 1 (8/10 = 0.8 measured from the
+    clip's lowest point). Exact to round-off (1e-9: forward kinematics).
+    """
+    run = _run(g1, turn_robot=0.0, turn_human=0.0, lift=0.08)
+    t = run.human["t"]
+    up = (t >= 0.5) & (t < 1.0)
+    run.human["left_ankle"][up, 2] += 0.08
+    for side in ("left", "right"):
+        run.human[f"{side}_ankle"][t >= 1.5, 2] -= 0.02
+    m = human_metrics(run, g1)
+    assert m["swing_height_ratio"]["lifts"] == 1
+    assert m["swing_height_ratio"]["min"] == pytest.approx(1.0, abs=1e-9)
+
+
 def test_run_without_person_is_refused(g1):
     run = _run(g1, turn_robot=0.0, turn_human=0.0, lift=0.0)
     run.human = {}

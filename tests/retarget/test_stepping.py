@@ -639,9 +639,9 @@ def test_the_robot_stands_on_one_leg_when_the_person_does():
 def test_kicks_lift_the_robot_foot():
     traj, m, ctrl = _run("cmu_135_04_front_kicks.bvh")
     # Every human lift over 5 cm (the kicks) is followed by the robot foot to >= 70 % of its
-    # height (issue 15): min 0.73, median 0.77 measured (0.75 / 0.79 before the absolute foot
-    # spots and the pivots: the figure moves by a few hundredths with any change); a high swing
-    # sole turns its toes
+    # height (issue 15), each lift above where the foot stood: min 0.78, median 0.97 measured
+    # (0.74 / 0.85 above the clip's lowest point, the former definition; the figure moves by a
+    # few hundredths with any change of the run); a high swing sole turns its toes
     # up like the person's foot (0.66 / 0.71 with a flat sole: the knee folded to 2.8 rad and
     # the ankle pitch stopped at its -0.87 rad limit).
     assert m["swing_height_ratio"]["lifts"] >= 3
@@ -703,11 +703,13 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
         # pivoting the stance sole: the heading ends 5 deg from the person's (146 deg with the
         # soles pinned flat; the largest error, 120 deg, is a 300 deg/s turn the pelvis lags).
         assert abs(m["heading_error_deg"]["final"]) <= 30.0
-        # Its lifts: 0.71 of the person's height at least (issue 15 asks 0.7; 0.40 before the
-        # contacts' corrector step and plane_trust, on one 7.8 cm lift at 10.9 s taken while
-        # the other foot is still landing from a turn; 0.00 before the pivots, 0.49 before the
-        # braking sole rows: this one lift moves with any change of the run). Bound 0.6.
-        assert m["swing_height_ratio"]["min"] >= 0.6
+        # Its lifts, each above where the foot stood: 0.74 of the person's height at least,
+        # issue 15's 0.7 asserted. Above the clip's lowest point (the former definition) the
+        # first lift read 0.69: the person's left foot stood 1.9 cm (scaled) above the lowest
+        # point the feet reach elsewhere in the capture volume, and its 5.2 cm lift counted as
+        # 7.1. Before: 0.40 before the contacts' corrector step and plane_trust, 0.00 before
+        # the pivots, 0.49 before the braking sole rows.
+        assert m["swing_height_ratio"]["min"] >= 0.7
         # Heading: 21 deg at most measured (126 before the corrector step and plane_trust).
         assert m["heading_error_deg"]["max"] <= 35.0
     assert _limit_overshoot(traj, ctrl.robot) <= 1e-9
