@@ -3,9 +3,16 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import pytest
+
+# A suite started in the background of a non-interactive shell (``pytest &``) inherits SIGINT
+# ignored, and so would the commands some tests stop with Ctrl-C (they then ran to their end
+# and exited 0): give the suite Python's own handler, which its children reset to the default.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = (REPO.parent / "shared").resolve()
