@@ -31,6 +31,7 @@ meaning within format version 1.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -70,6 +71,26 @@ class RobotTrajectory:
     human: dict[str, np.ndarray] = field(default_factory=dict)
     extra: dict[str, np.ndarray] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
+
+    def samples(self, start: int, stop: int) -> RobotTrajectory:
+        """The run's samples ``start:stop`` (every per-sample array cut; ``human`` whole).
+
+        ``targets``, ``actual`` and ``extra`` arrays are cut when their first axis has one
+        entry per sample; the person's motion keeps its own time base (``human/t``).
+        """
+        T = len(self.t)
+
+        def cut(x: Any) -> Any:
+            return x[start:stop] if isinstance(x, np.ndarray) and x.ndim and len(x) == T else x
+
+        return dataclasses.replace(
+            self,
+            t=self.t[start:stop], q=cut(np.asarray(self.q)), v=cut(np.asarray(self.v)),
+            contacts=cut(self.contacts), status=cut(self.status), solve_time=cut(self.solve_time),
+            tau=cut(self.tau), targets={k: cut(v) for k, v in self.targets.items()},
+            actual={k: cut(v) for k, v in self.actual.items()},
+            extra={k: cut(v) for k, v in self.extra.items()},
+        )  # fmt: skip
 
     def __len__(self) -> int:
         return len(self.t)

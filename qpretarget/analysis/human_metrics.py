@@ -68,7 +68,6 @@ gaps is held there by the interpolation), aligned at its first sample (``observe
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -302,13 +301,13 @@ def _root_observed(t: np.ndarray, th: np.ndarray, human: Mapping[str, Any]) -> n
 
 def _observed_span(
     traj: RobotTrajectory, th: np.ndarray, human: Mapping[str, Any]
-) -> tuple[RobotTrajectory, list[float] | None]:
+) -> tuple[RobotTrajectory, list[float] | None, np.ndarray]:
     """The run cut to the span where the person's waist and hips are observed.
 
     Before the first and after the last sample at which all three are :func:`observed` the
     person's root is only held by the interpolation (marker data that starts or ends with
-    gaps): nothing there is compared. Returns the run unchanged and ``None`` when the span is
-    the whole run.
+    gaps): nothing there is compared. Returns the run (unchanged, with ``None``, when the span is
+    the whole run), the span [s] and the :func:`_root_observed` mask of the returned samples.
 
     Raises:
         HumanMetricsError: They are observed at fewer than 2 samples.
@@ -316,7 +315,7 @@ def _observed_span(
     t = np.asarray(traj.t, float)
     seen = _root_observed(t, th, human)
     if seen.all():
-        return traj, None
+        return traj, None, seen
     idx = np.flatnonzero(seen)
     if len(idx) < 2:
         raise HumanMetricsError(
@@ -324,20 +323,7 @@ def _observed_span(
             "(marker gaps longer than 0.1 s everywhere): nothing to compare the robot with."
         )
     a, b = int(idx[0]), int(idx[-1]) + 1
-    T = len(t)
-
-    def cut(x: Any) -> Any:
-        return x[a:b] if isinstance(x, np.ndarray) and x.ndim >= 1 and len(x) == T else x
-
-    cropped = dataclasses.replace(
-        traj,
-        t=t[a:b], q=cut(np.asarray(traj.q)), v=cut(np.asarray(traj.v)),
-        contacts=cut(traj.contacts), status=cut(traj.status), solve_time=cut(traj.solve_time),
-        tau=cut(traj.tau), targets={k: cut(v) for k, v in traj.targets.items()},
-        actual={k: cut(v) for k, v in traj.actual.items()},
-        extra={k: cut(v) for k, v in traj.extra.items()},
-    )  # fmt: skip
-    return cropped, [float(t[a]), float(t[b - 1])]
+    return traj.samples(a, b), [float(t[a]), float(t[b - 1])], seen[a:b]
 
 
 def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dict[str, Any]:
@@ -364,7 +350,7 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
             "qpretarget retarget, or with an old version; retarget the clip again."
         )
     th = np.asarray(human["t"], float)
-    traj, span = _observed_span(traj, th, human)
+    traj, span, seen = _observed_span(traj, th, human)
     t = np.asarray(traj.t, float)
     T = len(t)
     if T < 2:
@@ -431,7 +417,6 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
     # The lean only where the person's pelvis is observed (marker data has gaps: CMU BVH none,
     # the OpenSim C3D walk its waist and hips for 1.5-3.5 s of 5 s only, held before and after
     # by the interpolation), from the first such sample.
-    seen = _root_observed(t, th, human)
     if Rh is not None and int(seen.sum()) >= 2:
         idx = np.flatnonzero(seen)
         lean = np.linalg.norm(pelvis_lean(rs.pelvis_R[idx]) - pelvis_lean(Rh[idx]), axis=1)

@@ -501,27 +501,29 @@ class Template:
         if p0 is None:
             self.set_centre_rest(pin.neutral(self.model))
             p0 = self._p0
-        art, par = self._articulation_of_joint, self._parents
         first = [int(g.max()) for g in self.articulations]  # the segment's own joint
-        up = []
-        for j in first:
-            i = int(par[min(self.articulations[art[j]])])
-            while i > 0 and art[i] < 0:
-                i = int(par[i])
-            up.append(i)
+        up = [self._parent_articulation(a) for a in range(self.n_centres)]
         out = np.zeros((self.n_centres, 3))
         inner = np.zeros(self.n_centres, bool)
         for a, j in enumerate(first):
-            below = [b for b, u in enumerate(up) if u > 0 and art[u] == a]
+            below = [b for b, u in enumerate(up) if u == a]
             inner[a] = bool(below)
             if below:
                 d = np.mean([p0[first[b]] for b in below], axis=0) - p0[j]
-            elif up[a] > 0:
-                d = p0[j] - p0[first[art[up[a]]]]
+            elif up[a] >= 0:
+                d = p0[j] - p0[first[up[a]]]
             else:
                 d = np.array([0.0, 0.0, 1.0])
             out[a] = d / max(np.linalg.norm(d), 1e-12)
         return out, inner
+
+    def _parent_articulation(self, a: int) -> int:
+        """The articulation next up the tree from articulation ``a`` (-1: none below the root)."""
+        art, par = self._articulation_of_joint, self._parents
+        i = int(par[int(min(self.articulations[a]))])
+        while i > 0 and art[i] < 0:
+            i = int(par[i])
+        return int(art[i]) if i > 0 else -1
 
     def _setup_blend(self) -> None:
         """Blend weights and parent-frame coordinates of the LBS points (reference posture)."""
@@ -605,7 +607,8 @@ class Template:
         *robot's* links meet. Once an articulation's centre is moved to the person's
         (:meth:`set_centres`; G1's elbows sit 8-9 cm up the arm from a person's), the points
         between the two cuts ride on the wrong segment: bending the elbow moves part of the
-        upper arm's surface with the forearm.
+        upper arm's surface with the forearm. (Departs from Wang 2017 IV.A, whose template
+        takes its segments from a parametric human model; ours are the robot's links.)
 
         At ``q`` (the centres' rest configuration, where moving a centre leaves the surface in
         place), for each articulation :math:`a` with a moved centre :math:`c_a` and a parent
@@ -622,22 +625,16 @@ class Template:
         """
         posed = self.pose(q, jacobians=False)
         w, nw, p, R = posed.points, posed.normals, posed.p, posed.R
-        par, art_of = self._parents, self._articulation_of_joint
         seg = self.seg_of_joint
         trunk = [k for k, n in enumerate(self.segment_names) if n in (ROOT_SEGMENT, "torso")]
         joint = self.joint.copy()
-        for group in self.articulations:
-            own, low = int(max(group)), int(min(group))
-            above = int(par[low])  # carries the parent segment's last link
-            if np.linalg.norm(self.centre_offsets[own]) < 1e-3 or seg[above] in trunk:
+        for a, group in enumerate(self.articulations):
+            own = int(max(group))
+            above = int(self._parents[int(min(group))])  # carries the parent segment's last link
+            b = self._parent_articulation(a)
+            if np.linalg.norm(self.centre_offsets[own]) < 1e-3 or seg[above] in trunk or b < 0:
                 continue
-            i = above
-            while i > 0 and art_of[i] < 0:
-                i = int(par[i])
-            if i <= 0:
-                continue
-            up = int(max(self.articulations[art_of[i]]))
-            u = p[own] - p[up]
+            u = p[own] - p[int(max(self.articulations[b]))]
             u /= max(float(np.linalg.norm(u)), 1e-12)
             d = w - p[own]
             s = d @ u

@@ -214,3 +214,18 @@ def test_a_person_never_seen_is_one_clear_error(g1):
     run.human["waist"][:] = np.nan
     with pytest.raises(HumanMetricsError, match="waist and hips are observed at fewer than 2"):
         human_metrics(run, g1)
+
+
+def test_samples_cut_every_per_sample_array_and_keep_the_person(g1):
+    """``RobotTrajectory.samples``: the observed span's cut (exact slices, no arithmetic)."""
+    run = _run(g1, turn_robot=0.0, turn_human=0.0, lift=0.0)
+    run.targets = {"pelvis": np.arange(len(run.t) * 3.0).reshape(-1, 3)}
+    run.extra = {"per_sample": np.arange(len(run.t)), "scales": np.ones(4)}
+    cut = run.samples(10, 50)
+    assert len(cut.t) == 40 and cut.t[0] == run.t[10]
+    np.testing.assert_array_equal(cut.q, run.q[10:50])
+    np.testing.assert_array_equal(cut.status, run.status[10:50])
+    np.testing.assert_array_equal(cut.targets["pelvis"], run.targets["pelvis"][10:50])
+    np.testing.assert_array_equal(cut.extra["per_sample"], run.extra["per_sample"][10:50])
+    assert cut.extra["scales"].shape == (4,)  # not one per sample: kept whole
+    assert cut.human is run.human  # the person keeps its own time base
