@@ -91,7 +91,8 @@ class FootTargets:
         calibration: The run's calibration.
         leg_scale: Leg-length ratio robot / person :math:`s`.
         leg_lengths: side -> robot leg length (hip-knee-ankle) [m].
-        leg_extension: Largest share of the leg length a target may ask for.
+        leg_extension: Largest share of the leg length a swing target may ask for
+            (``stepping.swing_reach``).
     """
 
     def __init__(

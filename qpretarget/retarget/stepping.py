@@ -136,6 +136,12 @@ class StepSettings:
             changed at most ``1 / lift_time`` per second): a sole high in the air need not be
             flat or turned exactly, and where its ankle is at a limit (a leg raised high with
             the body leaning back) a fully weighted sole orientation turned the pelvis instead.
+        swing_reach: A swing sole's target is kept within this share of the leg length from
+            the scaled hip (:meth:`~qpretarget.retarget.feet.FootTargets.reachable`), in (0, 1].
+            The standing legs keep ``scaling.leg_extension`` (0.92 by default: a straight
+            stance knee stalls the pelvis), but a person puts a foot down with the knee nearly
+            straight: with 0.92 the long strides' landings (kicks, kata) were pulled 3-5 cm
+            towards the hip, and each stance kept the offset (docs/retargeting.md).
     """
 
     clearance: float = 0.02
@@ -162,6 +168,7 @@ class StepSettings:
     absolute: bool = True
     flight_foot_weight: float = 0.1
     swing_orientation_weight: float = 0.1
+    swing_reach: float = 0.97
 
     def __post_init__(self) -> None:
         """Validate.
@@ -182,6 +189,10 @@ class StepSettings:
                     f"{name} is a factor on the sole's weight in (0, 1], got "
                     f"{getattr(self, name)!r}"
                 )
+        if self.swing_reach > 1.0:
+            raise ValueError(
+                f"swing_reach is a share of the leg length in (0, 1], got {self.swing_reach!r}"
+            )
 
 
 @dataclass
