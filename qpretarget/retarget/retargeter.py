@@ -450,6 +450,10 @@ class Retargeter:
         self._foot_targets: FootTargets | None = None
         #: Last time the person was in flight [s].
         self._flight_t = -math.inf
+        #: Start of an anticipated take-off (``stepping.takeoff``) [s], ``None`` when none.
+        self._takeoff_t: float | None = None
+        #: The person's waist height at the previous tick [m] (its rising speed).
+        self._waist_z: float | None = None
         if self.stepper is not None and self.support is not None:
             for fb in self.support.feet.values():  # a run may follow one that ended in flight
                 ctrl.set_weight_scale(fb.task, 1.0)
@@ -611,6 +615,8 @@ class Retargeter:
                 phase = self.detector.update(t, np.array(pts["left"]), np.array(pts["right"]))
                 if self.stepper is not None and self.detector.flight:
                     phase = "flight"
+                if self.stepper is not None:
+                    self._anticipate_takeoff(t, kp)
             elif self.stepper is not None and not self._feet_warned:
                 # No foot key-points: no phase to switch contacts from; the feet stay planted.
                 self._feet_warned = True
@@ -707,7 +713,7 @@ class Retargeter:
             # landing spot (rooting at the robot's other foot would place the body from the
             # person's foot in the air).
             on = self._stp.contacts
-            support = self.detector.feet
+            support = self._support_now
             soles = {s: state.frame_placement(self._fs.sole_ids[s]) for s in on}
             for s in SIDES:
                 spot = self.stepper.landing_spot(s)
@@ -750,7 +756,7 @@ class Retargeter:
         def waist_dyaw() -> float:
             return waist_yaw(kp, rots) - self._waist_yaw_cal
 
-        desired, human_foot = ft.orient(scaled, kp, soles, waist_dyaw, flight=self.detector.flight)
+        desired, human_foot = ft.orient(scaled, kp, soles, waist_dyaw, flight=self._in_flight)
         base = ctrl.state.q
         yaw = math.atan2(
             2.0 * (base[6] * base[5] + base[3] * base[4]),
@@ -764,7 +770,7 @@ class Retargeter:
         # Swing targets the legs cannot reach are raised in flight and for lift_time after it
         # (the landing spot is taken as the person's foot touches down): feet.REACH_RAISE.
         lift = self._sup.stepping.lift_time
-        if self.detector.flight:
+        if self._in_flight:
             self._flight_t = t
             # In flight the soles rise with the person's ankles, not with the lowest foot point:
             # a jumping person points the feet (toes 10-15 cm under the ankles), a flat robot
@@ -776,7 +782,7 @@ class Retargeter:
                     heights[side] = max(heights[side], h[0])
         desired = ft.place(
             desired, scaled, kp, soles, stepper.contacts, heights, stepper.ground, heading,
-            rolled=stepper.rolled, flight=self.detector.flight or t - self._flight_t <= lift,
+            rolled=stepper.rolled, flight=self._in_flight or t - self._flight_t <= lift,
         )  # fmt: skip
         before = dict(stepper.states)
         # Heel off: the person's ankle rises over its ground more than the toe does (a foot
@@ -788,14 +794,14 @@ class Retargeter:
                 if math.isfinite(h[0] - h[1]):
                     rise[side] = self._leg_scale * (h[0] - h[1])
         cmd = stepper.update(
-            t, self.detector.feet, soles, desired, human_foot, flight=self.detector.flight,
+            t, self._support_now, soles, desired, human_foot, flight=self._in_flight,
             toe_rise=rise, moved={s: ft.moved(s, kp) for s in SIDES},
             low={s: self.detector.height[s] < self.detector.thresholds.height_on for s in SIDES},
         )  # fmt: skip
         for side in SIDES:
             if before[side] == "swing" and cmd.states[side] != "swing":
                 ft.touched_down(side, kp)
-            elif before[side] != "swing" and cmd.states[side] == "swing" and self.detector.flight:
+            elif before[side] != "swing" and cmd.states[side] == "swing" and self._in_flight:
                 # Lifted into the person's flight: nothing holds the body, and a sole target
                 # turning fast turns the whole robot (FootTargets.lifted).
                 ft.lifted(side, soles[side])
@@ -806,6 +812,58 @@ class Retargeter:
         for side, anchor in cmd.anchors.items():
             self._con.set_anchor(self._sup.feet[side].contact, anchor, moving=side in cmd.pivoting)
         return cmd
+
+    @property
+    def _in_flight(self) -> bool:
+        """The robot is released into flight: the person's, or an anticipated take-off."""
+        return bool(self.detector.flight) or self._takeoff_t is not None
+
+    @property
+    def _support_now(self) -> dict[str, bool]:
+        """Whether the person stands on each foot (neither during an anticipated take-off)."""
+        if self._takeoff_t is not None:
+            return {s: False for s in SIDES}
+        return self.detector.feet
+
+    def _anticipate_takeoff(self, t: float, kp: Mapping[str, np.ndarray]) -> None:
+        r"""Release the robot into flight before the person's feet leave (``stepping.takeoff``).
+
+        With :math:`z_h` the person's waist height, :math:`s` the leg-length ratio and
+        :math:`z_0` the robot's waist height matching the person's at calibration, the scaled
+        waist is :math:`z^* = z_0 + s\,(z_h - z_h^{cal})` (the kinematic height rule of single
+        support and flight, :class:`~qpretarget.retarget.rooting.Rooting`). A take-off is
+        anticipated when :math:`s\,\dot z_h` exceeds ``takeoff_speed`` and :math:`z^*` is more
+        than ``takeoff_gap`` over the robot's waist while a robot foot stands (the others in
+        swing) and the person is not in flight yet; it holds until the person's flight is
+        detected, for at most ``takeoff_hold``, or until the person's waist stops rising (the
+        soles are then put down again, as after any swing).
+        """
+        st = self._sup.stepping
+        z = float(kp["waist"][2]) if "waist" in kp else math.nan
+        prev, self._waist_z = self._waist_z, z
+        if (
+            not st.takeoff
+            or self.detector.flight
+            or self._rooting is None
+            or prev is None
+            or not math.isfinite(z - prev)
+            or "waist" not in self.robot_map.keypoints
+        ):
+            self._takeoff_t = None
+            return
+        speed = self._leg_scale * (z - prev) / self.dt
+        if self._takeoff_t is not None:
+            if speed <= 0.0 or t - self._takeoff_t > st.takeoff_hold:
+                self._takeoff_t = None
+            return
+        states = self._stp.states
+        standing = [s for s in SIDES if states[s] in ("stance", "tiptoe")]
+        if not standing or any(states[s] not in ("stance", "tiptoe", "swing") for s in SIDES):
+            return
+        goal = self._rooting.waist_height + self._leg_scale * (z - self._cal.human_waist[2])
+        robot = float(self.com_estimate.robot_point("waist", self.controller.state.data)[2])
+        if speed > st.takeoff_speed and goal - robot > st.takeoff_gap:
+            self._takeoff_t = t
 
     def _swing_weights(self, cmd: StepCommand, ground: float) -> None:
         r"""Swing soles' task weights from their height (``flight_foot_weight`` and so on).
@@ -831,7 +889,7 @@ class Retargeter:
             if cmd.states.get(side) == "swing" and sole is not None:
                 r = min(1.0, max(0.0, (float(sole.translation[2]) - ground - 0.05) / 0.05))
                 ori[:] = 1.0 - (1.0 - f_o) * r
-                if self.detector.flight:
+                if self._in_flight:
                     flight = 1.0 - (1.0 - f_f) * r
                     pos *= flight
                     ori *= flight

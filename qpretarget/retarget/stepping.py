@@ -63,7 +63,7 @@ PIVOT_SWING_MAX = 0.25
 TIPTOE_STOP = 0.05
 
 #: The switches of :class:`StepSettings` (every other setting is a positive number).
-BOOL_SETTINGS = frozenset({"pivot", "initial_stance", "toe_off", "tiptoe", "absolute"})
+BOOL_SETTINGS = frozenset({"pivot", "initial_stance", "toe_off", "tiptoe", "absolute", "takeoff"})
 
 
 @dataclass(frozen=True)
@@ -142,6 +142,24 @@ class StepSettings:
             stance knee stalls the pelvis), but a person puts a foot down with the knee nearly
             straight: with 0.92 the long strides' landings (kicks, kata) were pulled 3-5 cm
             towards the hip, and each stance kept the offset (docs/retargeting.md).
+        takeoff: Whether the robot's feet may leave the ground before the person's at a
+            take-off (:meth:`~qpretarget.retarget.Retargeter._anticipate_takeoff`): while the
+            scaled person's waist rises faster than ``takeoff_speed`` and is more than
+            ``takeoff_gap`` over the robot's (the person's height since calibration times the
+            leg-length ratio, the height rule of single support and flight), with a robot foot
+            standing, both soles are released into flight (rising with the person's ankles),
+            until the person's flight is detected, for at most ``takeoff_hold``, or until the
+            person's waist stops rising (the soles are then put down again). A person pushes
+            off on the toes, the ankles rising with the heels: on the playground jumps the
+            waist rose 14 cm (scaled 10) in 0.12 s with the toes still down, and a robot
+            standing on its soles (its roll onto the toes held by the ankle's pitch range and
+            rate) stayed 8-10 cm under it until the person's feet left the floor.
+        takeoff_speed: Rising speed of the scaled person's waist above which a take-off is
+            anticipated [m/s] (a walk's waist rises at 0.2-0.3 m/s, a push-off into a jump
+            at 1-1.5).
+        takeoff_gap: Height of the scaled person's waist over the robot's above which a
+            take-off is anticipated [m].
+        takeoff_hold: Longest anticipated take-off before the person's flight [s].
     """
 
     clearance: float = 0.02
@@ -169,6 +187,10 @@ class StepSettings:
     flight_foot_weight: float = 0.1
     swing_orientation_weight: float = 0.1
     swing_reach: float = 0.97
+    takeoff: bool = True
+    takeoff_speed: float = 0.8
+    takeoff_gap: float = 0.03
+    takeoff_hold: float = 0.15
 
     def __post_init__(self) -> None:
         """Validate.

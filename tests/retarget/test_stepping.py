@@ -775,7 +775,8 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
 
 def test_both_feet_leave_the_ground_when_the_person_jumps():
     traj, m, ctrl = _run("cgspeed_cmu_01_01_playground_jumps.bvh")
-    # Ankle displacement error (issue 15 asks 0.10 leg lengths): 0.095 measured (0.26 with the
+    # Ankle displacement error (issue 15 asks 0.10 leg lengths): 0.059 measured (0.070 before
+    # the take-offs were anticipated, stepping.takeoff; 0.095 at stop 27; 0.26 with the
     # stride from the standing foot, which carried every short landing into the next steps;
     # 0.112 with the absolute foot spots; 0.105 with the push-offs on the toes; 0.096 with swing
     # targets raised rather than pulled under the hip in flight and at landing, REACH_RAISE).
@@ -790,11 +791,11 @@ def test_both_feet_leave_the_ground_when_the_person_jumps():
     # tiptoe is not flight: the robot's feet are off the ground when their soles' lowest
     # corners are (13/12 while the metric took the sole origin, 1-3 cm up on a rolled sole).
     assert m["flight"]["robot"] >= m["flight"]["human"]
-    # Share of the person's flight time the robot flies: 0.86 before, 0.72 since a foot held
-    # slow under 5 cm for 0.2 s while the other is up counts as stood on (the metric's flight is
-    # both feet over 3 cm: a ball-of-the-foot stance, or feet on a raised surface, count as
-    # flight there; the dance spin's 4.6 s of false flight needed the detector change).
-    assert m["flight"]["shared_share"] >= 0.7
+    # Share of the person's flight time the robot flies: asserted below (0.86 at stop 26,
+    # 0.72 since a foot held slow under 5 cm for 0.2 s while the other is up counts as stood
+    # on: the metric's flight is both feet over 3 cm, a ball-of-the-foot stance, or feet on a
+    # raised surface, count as flight there; the dance spin's 4.6 s of false flight needed the
+    # detector change).
     assert m["stance_slip_mm"]["max"] < 1.0
     # A landing sole comes down no faster than it can stop from at 30 m/s^2 (sole_ground
     # brake_accel): 1.4 mm measured at its lowest corner; 10.8 mm with first-order rows alone,
@@ -802,21 +803,58 @@ def test_both_feet_leave_the_ground_when_the_person_jumps():
     assert m["sole_below_ground_mm"] < 2.0
     assert _limit_overshoot(traj, ctrl.robot) <= 1e-9
     assert m["held_ticks"] == 0
-    # Push-offs on the toes (stepping `tiptoe`): the person rises on the ball of the standing
-    # foot before a hop, of both feet before a jump; the robot's soles roll about their front
-    # edges with the contacts kept. 14 such stances measured, their front edges moving at most
-    # 0.65 mm (issue 15's stance slip bound, 1 mm, at the contact's points).
-    n_tiptoe, edge_slip = _tiptoe_edge_slip(traj, ctrl.robot)
-    assert n_tiptoe >= 8
-    assert edge_slip < 1e-3
-    # Root height vs the person's: max 13.5 cm and RMS 3.0 cm measured since the clip's T-pose
-    # frame 0 is dropped (11.5 and 3.5 with it: the calibration and the metrics' alignment on a
-    # T-pose; 17.8 and 4.1 with flat soles at every push-off; issue 15 asks 5 cm: the rest is
-    # the take-off itself, the person's feet leaving the floor 30-60 ms before the detector
-    # says so, and the flight's apex). Bounds 15 and 3.9 cm: the chaotic clip's figures move
-    # by about 1.5 and 0.1-0.5 cm with any change.
-    assert m["pelvis_height_error_m"]["max"] <= 0.15
-    assert m["pelvis_height_error_m"]["rms"] <= 0.039
+    # The push-offs on the toes are anticipated take-offs now (stepping.takeoff): the robot's
+    # soles leave the floor as the person's waist rises out of their reach, before rolling
+    # onto the toes (14 tiptoe stances before, 0 now); the roll itself is tested on the
+    # reach-up clip below, where the person stands on tiptoe without jumping.
+    # Root height vs the person's: max 8.3 cm and RMS 1.9 cm measured with the take-offs
+    # anticipated (stepping.takeoff: 10.4 and 2.8 without, the robot on its soles 8-10 cm
+    # under the person's waist rising on the toes; 13.5 and 3.0 with the 0.2 mm self-collision
+    # trust region; 17.8 and 4.1 with flat soles at every push-off). Issue 15 asks 5 cm: the
+    # largest left are two lift-offs whose sole turns 100-180 deg within 0.2 s (17.3 and 8.9 s,
+    # the pelvis dragged 5-7 cm under its target). Bounds 10 and 2.5 cm: the chaotic clip's
+    # figures move by about 1.5 and 0.1-0.5 cm with any change.
+    assert m["pelvis_height_error_m"]["max"] <= 0.10
+    assert m["pelvis_height_error_m"]["rms"] <= 0.025
+    # The robot's feet are off the ground through the person's flights: 0.99 of the person's
+    # flight time shared, and 0.96 of the samples with a person's foot up (lift agreement)
+    # have the robot's foot up (0.82 and 0.80 without the anticipation).
+    assert m["flight"]["shared_share"] >= 0.9
+    assert m["lift_agreement"] >= 0.9
+
+
+def test_the_robot_takes_off_with_the_person_not_after():
+    """stepping.takeoff on one jump of the playground clip (19.1-20.8 s, take-off at 20.2 s).
+
+    The person's waist rises 14 cm in 0.12 s with the toes still down; the detector sees the
+    flight once the feet are up (20.27 s). With the anticipation the robot's soles are released
+    when the scaled waist rises faster than takeoff_speed and out of the legs' reach, before
+    that; without it, at it, the pelvis 8-10 cm under the person's meanwhile.
+    """
+    runs = {}
+    for on in (True, False):
+        config = yaml.safe_load(CONFIG.read_text())
+        config["retarget"]["support"]["stepping"]["takeoff"] = on
+        ctrl = Controller(config, base_dir=CONFIG.parent)
+        motion = load_motion(MOCAP / "cgspeed_cmu_01_01_playground_jumps.bvh")
+        traj = Retargeter(ctrl).retarget(motion, start=19.1, end=20.8)
+        states = list(traj.extra["support_state"])
+        person = list(traj.extra["human_phase"]).index("flight")
+        runs[on] = (states.index("swing/swing"), person, human_metrics(traj, ctrl.robot))
+    (robot_on, person, m_on), (robot_off, person_off, m_off) = runs[True], runs[False]
+    assert person == person_off  # the person's phases do not depend on the robot
+    # Released 1-15 ticks (10-150 ms, takeoff_hold) before the person's flight is detected
+    # (9 measured); without the anticipation at the same tick or later.
+    assert person - 15 <= robot_on < person <= robot_off
+    # The root height follows the person through the push-off: 4.4 cm max measured on the
+    # excerpt (8.9 without), RMS 1.6 (2.7). Bounds 6 cm and 3 cm better: the excerpt's
+    # figures move by a few mm with any change of the run.
+    assert m_on["pelvis_height_error_m"]["max"] <= 0.06
+    assert m_on["pelvis_height_error_m"]["max"] <= m_off["pelvis_height_error_m"]["max"] - 0.03
+    # Both feet still leave the ground (the robot's flight interval covers the person's) and
+    # come down with contacts pinned.
+    assert m_on["flight"]["robot"] >= 1 and m_on["flight"]["human"] >= 1
+    assert m_on["stance_slip_mm"]["max"] < 1.0 and m_on["held_ticks"] == 0
 
 
 def test_rising_on_the_toes_to_reach_up_rolls_the_soles_with_their_contacts():
@@ -835,13 +873,15 @@ def test_rising_on_the_toes_to_reach_up_rolls_the_soles_with_their_contacts():
     assert m["held_ticks"] == 0
 
 
-# Excerpts: a walk's first steps; a jump's two-foot push-off on the toes (tiptoe) into flight;
-# a run that starts on one foot (the initial stance with the other raised).
+# Excerpts: a walk's first steps; a jump's two-foot push-off into flight (the take-off
+# anticipated); a rise on the toes (tiptoe) into a hop; a run that starts on one foot (the
+# initial stance with the other raised).
 @pytest.mark.parametrize(
     "clip, start, end",
     [
         ("cmu_16_33_walk_stop.bvh", 0.0, 1.4),
         ("cgspeed_cmu_01_01_playground_jumps.bvh", 12.0, 13.2),
+        ("cmu_14_07_reach_up_tiptoe.bvh", 6.0, 7.2),
         ("cmu_49_18_one_leg_balance.bvh", 0.0, 1.0),
     ],
 )
@@ -851,8 +891,11 @@ def test_online_push_equals_offline_causal_with_contacts_switching(clip, start, 
     rt = Retargeter(ctrl)
     offline = rt.retarget(motion, causal=True)
     assert not offline.contacts.all()  # a foot was lifted: contacts switched in the excerpt
-    if "jumps" in clip:
-        assert "tiptoe/tiptoe" in set(offline.extra["support_state"])
+    states, phases = list(offline.extra["support_state"]), list(offline.extra["human_phase"])
+    if "jumps" in clip:  # released 11 ticks before the person's flight is detected
+        assert states.index("swing/swing") < phases.index("flight")
+    if "reach_up" in clip:
+        assert "tiptoe/tiptoe" in states
     rt.start(motion)
     commands = []
     for k in range(len(motion)):
