@@ -7,7 +7,8 @@ do what the person does with its feet: every foot is a small state machine,
 ==========  ==================================================================================
 stance      6-D contact on, the sole pinned where it landed; it *pivots* in place (the anchor's
             yaw ramped towards the person's foot yaw) when the person's foot turns by more than
-            ``pivot_yaw`` while staying within ``pivot_radius`` of where it landed
+            ``pivot_yaw`` while staying within ``pivot_radius`` of where it landed and the other
+            foot swings, or by more than ``pivot_yaw_double`` with the other foot standing
 toe_off     the person's heel rises while the other robot foot stands flat: contact off, the
             sole turned about the front edge of its rectangle (:meth:`KinematicStepper.toe_pose`)
 tiptoe      the person's heels both rise (the rise before a jump, reaching up on the toes), or
@@ -63,7 +64,9 @@ PIVOT_SWING_MAX = 0.25
 TIPTOE_STOP = 0.05
 
 #: The switches of :class:`StepSettings` (every other setting is a positive number).
-BOOL_SETTINGS = frozenset({"pivot", "initial_stance", "toe_off", "tiptoe", "absolute", "takeoff"})
+BOOL_SETTINGS = frozenset(
+    {"pivot", "pivot_double", "initial_stance", "toe_off", "tiptoe", "absolute", "takeoff"}
+)
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,15 @@ class StepSettings:
             1-2 mm).
         pivot: Whether stance feet pivot at all (the shipped G1 and Talos configs: off, see
             docs/retargeting.md section 4b).
+        pivot_double: Whether a stance foot also pivots while the other foot stands, once the
+            person's foot has turned by ``pivot_yaw_double`` (measured since the other foot
+            stood; not while the other foot pivots). A person turning on the ball of one foot
+            with both feet down left the robot's sole behind by up to 177 deg, and the next
+            lift-off turned it within 0.1 s, dragging the pelvis 5-12 cm down (the jumps at
+            17.1 s).
+        pivot_yaw_double: Turn of the person's stance foot that starts a pivot while the other
+            foot stands [rad] (30 deg: at 15 deg, that of single support, the karate kata's
+            stance feet turned against each other and its run broke).
         toe_off: Whether a stance foot rolls onto its toes when the person's heel rises
             (walk push-off, a rise before a jump): contact off, the sole turned about its front
             edge, which stays where it stood.
@@ -136,6 +148,9 @@ class StepSettings:
             changed at most ``1 / lift_time`` per second): a sole high in the air need not be
             flat or turned exactly, and where its ankle is at a limit (a leg raised high with
             the body leaning back) a fully weighted sole orientation turned the pelvis instead.
+        swing_yaw_rate: Largest yaw rate of a swing sole's target [rad/s] (690 deg/s): a foot
+            lifted 100-180 deg from the person's foot yaw turned within the 0.1 s ``lift_time``
+            blend, at up to 1,800 deg/s, and the turning leg dragged the pelvis 5-7 cm down.
         swing_reach: A swing sole's target is kept within this share of the leg length from
             the scaled hip (:meth:`~qpretarget.retarget.feet.FootTargets.reachable`), in (0, 1].
             The standing legs keep ``scaling.leg_extension`` (0.92 by default: a straight
@@ -174,6 +189,8 @@ class StepSettings:
     pivot_rate: float = math.radians(360.0)
     pivot_accel: float = 100.0
     pivot: bool = True
+    pivot_double: bool = True
+    pivot_yaw_double: float = math.radians(30.0)
     initial_stance: bool = True
     toe_off: bool = True
     toe_rise: float = 0.02
@@ -187,6 +204,7 @@ class StepSettings:
     flight_foot_weight: float = 0.1
     swing_orientation_weight: float = 0.1
     swing_reach: float = 0.97
+    swing_yaw_rate: float = 12.0
     takeoff: bool = True
     takeoff_speed: float = 0.8
     takeoff_gap: float = 0.03
@@ -338,6 +356,8 @@ class KinematicStepper:
         #: side -> [person's foot yaw last sample, its turn since the pivot's start (unwrapped),
         #: its points then, the anchor's yaw then, pivot started].
         self._pivot: dict[str, list] = {}
+        #: Sides whose pivot is measured while the other foot stands (``pivot_double``).
+        self._pivot_double: set[str] = set()
         #: side -> yaw rate of a pivoting anchor [rad/s] (ramped by ``pivot_accel``).
         self._omega: dict[str, float] = {}
         #: side -> the pivoting anchor's yaw, unwrapped [rad].
@@ -392,6 +412,7 @@ class KinematicStepper:
         self._since = {s: t for s in SIDES}
         self._anchor = {s: soles[s].copy() for s in SIDES}
         self._landing, self._target, self._pivot, self._lift = {}, {}, {}, {}
+        self._pivot_double = set()
         self._omega, self._yaw_u = {}, {}
         self._toe_down, self._toe_armed, self._restep = set(), set(), set()
         self._roll, self._roll_rate = {}, {}
@@ -521,9 +542,19 @@ class KinematicStepper:
                     # Pivots only while the other foot swings: turning one anchored sole while
                     # the other is anchored (or landing) twists the legs against both contacts
                     # (on the front kicks such a pivot made the contacts give, the robot spun).
-                    # The person's turn is measured from here on.
-                    self._rebase_pivot(side, human_foot.get(side))
-                    pivot = self._turn_anchor(side, None)
+                    # The person's turn is measured from here on, unless the other foot stands
+                    # still: a turn past pivot_yaw_double on the ball of this foot is a pivot.
+                    other = _OTHER[side]
+                    both = self.states[other] == "stance" and other not in self._omega
+                    if st.pivot_double and both:
+                        self._pivot_double.add(side)
+                        pivot = self._pivot_anchor(
+                            side, human_foot.get(side), _yaw_of(desired[side].rotation),
+                            threshold=st.pivot_yaw_double,
+                        )  # fmt: skip
+                    else:
+                        self._rebase_pivot(side, human_foot.get(side))
+                        pivot = self._turn_anchor(side, None)
                 elif (
                     armed
                     and on_toes
@@ -535,6 +566,17 @@ class KinematicStepper:
                     # a 1.2 rad/s pivot to end).
                     pivot = self._turn_anchor(side, None)
                 else:
+                    if side in self._pivot_double:
+                        # The other foot lifted: single support's pivot_yaw counts from here,
+                        # unless a pivot started with both feet down goes on (a turn measured
+                        # since the other foot stood started a pivot at every lift: the karate
+                        # kata's run broke, heading 117 deg off).
+                        self._pivot_double.discard(side)
+                        record, foot = self._pivot.get(side), human_foot.get(side)
+                        if record is not None and not record[4] and foot is not None:
+                            # From the last sample's yaw: this tick's turn counts.
+                            anchor_yaw = _yaw_of(self._anchor[side].rotation)
+                            self._start_pivot(side, (record[0], foot[1]), anchor_yaw)
                     pivot = self._pivot_anchor(
                         side, human_foot.get(side), _yaw_of(desired[side].rotation)
                     )
@@ -645,6 +687,7 @@ class KinematicStepper:
                         self._lift.pop(side)
                     else:
                         target = blend_pose(start[1], target, w)
+                target = self._yaw_limited(side, target)
                 feet[side] = target
                 self._target[side] = target
             elif state == "toe_off":
@@ -773,6 +816,23 @@ class KinematicStepper:
             return None
         return self._landing[side].copy()
 
+    def _yaw_limited(self, side: str, target: pin.SE3) -> pin.SE3:
+        r"""A swing target turned at most ``swing_yaw_rate`` :math:`dt` from the last one.
+
+        The yaw change :math:`\delta` beyond the limit is taken out by a turn about the
+        vertical, :math:`R \leftarrow R_z(\mathrm{clip}(\delta) - \delta)\, R` (pitch and
+        roll kept); the first swing tick (no previous target) is the lift-off pose.
+        """
+        prev = self._target.get(side)
+        if prev is None:
+            return target
+        delta = wrap_angle(_yaw_of(target.rotation) - _yaw_of(prev.rotation))
+        limit = self.settings.swing_yaw_rate * self.dt
+        if abs(delta) <= limit:
+            return target
+        turn = pin.exp3(np.array([0.0, 0.0, math.copysign(limit, delta) - delta]))
+        return pin.SE3(turn @ target.rotation, target.translation.copy())
+
     def _enter(self, t: float, side: str, state: str) -> None:
         self.states[side] = state
         self._since[side] = t
@@ -794,7 +854,11 @@ class KinematicStepper:
         self._yaw_u[side] = anchor_yaw
 
     def _pivot_anchor(
-        self, side: str, foot: tuple[float, np.ndarray] | None, yaw: float | None = None
+        self,
+        side: str,
+        foot: tuple[float, np.ndarray] | None,
+        yaw: float | None = None,
+        threshold: float | None = None,
     ) -> pin.SE3 | None:
         """The ramped anchor of a stance foot that pivots, or ``None``.
 
@@ -826,7 +890,7 @@ class KinematicStepper:
         if xy.shape != xy0.shape or _least_motion(xy, xy0) > st.pivot_radius:
             return self._turn_anchor(side, None)
         if not active:
-            if abs(turn) < st.pivot_yaw:
+            if abs(turn) < (st.pivot_yaw if threshold is None else threshold):
                 return self._turn_anchor(side, None)
             start[4] = True
         if yaw is not None:
