@@ -148,9 +148,15 @@ class StepSettings:
             changed at most ``1 / lift_time`` per second): a sole high in the air need not be
             flat or turned exactly, and where its ankle is at a limit (a leg raised high with
             the body leaning back) a fully weighted sole orientation turned the pelvis instead.
-        swing_yaw_rate: Largest yaw rate of a swing sole's target [rad/s] (690 deg/s): a foot
-            lifted 100-180 deg from the person's foot yaw turned within the 0.1 s ``lift_time``
-            blend, at up to 1,800 deg/s, and the turning leg dragged the pelvis 5-7 cm down.
+        swing_yaw_rate: Largest yaw rate of a swing sole's target 10 cm or more over the floor
+            [rad/s] (690 deg/s): a foot lifted 100-180 deg from the person's foot yaw turned
+            within the 0.1 s ``lift_time`` blend, at up to 1,800 deg/s, and the turning leg
+            dragged the pelvis 5-7 cm down.
+        swing_yaw_rate_floor: The same up to 5 cm over the floor [rad/s] (460 deg/s; linear in
+            between, the ramp of the swing weights): a sole turning fast just off the floor (a
+            re-step turning 80 deg, a lift-off turning 140 deg) still pulled the pelvis 4-5 cm
+            under its target at 690 deg/s; high up (the kata's kicks) the faster limit keeps
+            the foot with the person's.
         swing_reach: A swing sole's target is kept within this share of the leg length from
             the scaled hip (:meth:`~qpretarget.retarget.feet.FootTargets.reachable`), in (0, 1].
             The standing legs keep ``scaling.leg_extension`` (0.92 by default: a straight
@@ -205,6 +211,7 @@ class StepSettings:
     swing_orientation_weight: float = 0.1
     swing_reach: float = 0.97
     swing_yaw_rate: float = 12.0
+    swing_yaw_rate_floor: float = 8.0
     takeoff: bool = True
     takeoff_speed: float = 0.8
     takeoff_gap: float = 0.03
@@ -817,17 +824,22 @@ class KinematicStepper:
         return self._landing[side].copy()
 
     def _yaw_limited(self, side: str, target: pin.SE3) -> pin.SE3:
-        r"""A swing target turned at most ``swing_yaw_rate`` :math:`dt` from the last one.
+        r"""A swing target turned at most :math:`\omega\, dt` from the last one.
 
-        The yaw change :math:`\delta` beyond the limit is taken out by a turn about the
-        vertical, :math:`R \leftarrow R_z(\mathrm{clip}(\delta) - \delta)\, R` (pitch and
-        roll kept); the first swing tick (no previous target) is the lift-off pose.
+        :math:`\omega` is ``swing_yaw_rate_floor`` for a sole target up to 5 cm over the floor,
+        ``swing_yaw_rate`` from 10 cm, linear in between. The yaw change :math:`\delta` beyond
+        the limit is taken out by a turn about the vertical, :math:`R \leftarrow
+        R_z(\mathrm{clip}(\delta) - \delta)\, R` (pitch and roll kept); the first swing tick
+        (no previous target) is the lift-off pose.
         """
         prev = self._target.get(side)
         if prev is None:
             return target
         delta = wrap_angle(_yaw_of(target.rotation) - _yaw_of(prev.rotation))
-        limit = self.settings.swing_yaw_rate * self.dt
+        st = self.settings
+        r = min(1.0, max(0.0, (float(target.translation[2]) - self.ground - 0.05) / 0.05))
+        rate = st.swing_yaw_rate_floor + (st.swing_yaw_rate - st.swing_yaw_rate_floor) * r
+        limit = rate * self.dt
         if abs(delta) <= limit:
             return target
         turn = pin.exp3(np.array([0.0, 0.0, math.copysign(limit, delta) - delta]))
