@@ -89,8 +89,8 @@ class StepSettings:
             speeds up and slows down smoothly (a pivot started at full rate in one tick asked
             for a joint-speed jump beyond the acceleration limits; the contact then gave
             1-2 mm).
-        pivot: Whether stance feet pivot at all (the shipped G1 and Talos configs: off, see
-            docs/retargeting.md section 4b).
+        pivot: Whether stance feet pivot at all (on in the shipped G1 config, off in Talos's:
+            on the front kicks Talos's pivots twisted its legs, docs/retargeting.md section 4b).
         pivot_double: Whether a stance foot also pivots while the other foot stands, once the
             person's foot has turned by ``pivot_yaw_double`` (measured since the other foot
             stood; not while the other foot pivots). A person turning on the ball of one foot
