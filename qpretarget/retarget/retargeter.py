@@ -86,7 +86,7 @@ from .spec import (
     _number,
     default_robot_keypoints,
 )
-from .stepping import KinematicStepper, StepCommand, blend_pose
+from .stepping import KinematicStepper, StepCommand, blend_pose, swing_height_ramp
 from .stream import Command, KeypointStream, iter_frames
 from .support import FOOT_POINTS, ComEstimate, FootSupport
 from .whole_body import whole_body_config
@@ -856,13 +856,15 @@ class Retargeter:
             if speed <= 0.0 or t - self._takeoff_t > st.takeoff_hold:
                 self._takeoff_t = None
             return
+        if speed <= st.takeoff_speed:
+            return
         states = self._stp.states
         standing = [s for s in SIDES if states[s] in ("stance", "tiptoe")]
         if not standing or any(states[s] not in ("stance", "tiptoe", "swing") for s in SIDES):
             return
         goal = self._rooting.waist_height + self._leg_scale * (z - self._cal.human_waist[2])
         robot = float(self.com_estimate.robot_point("waist", self.controller.state.data)[2])
-        if speed > st.takeoff_speed and goal - robot > st.takeoff_gap:
+        if goal - robot > st.takeoff_gap:
             self._takeoff_t = t
 
     def _swing_weights(self, cmd: StepCommand, ground: float) -> None:
@@ -887,7 +889,7 @@ class Retargeter:
             ori = np.ones(3 if task.has_orientation else 0)
             sole = cmd.feet.get(side)
             if cmd.states.get(side) == "swing" and sole is not None:
-                r = min(1.0, max(0.0, (float(sole.translation[2]) - ground - 0.05) / 0.05))
+                r = swing_height_ramp(float(sole.translation[2]) - ground)
                 ori[:] = 1.0 - (1.0 - f_o) * r
                 if self._in_flight:
                     flight = 1.0 - (1.0 - f_f) * r

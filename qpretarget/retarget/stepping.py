@@ -302,6 +302,16 @@ def _ramp(w: float, r: float, dt: float, rate_max: float, accel: float) -> float
     return max(w - dw, min(w + dw, math.copysign(mag, r)))
 
 
+def swing_height_ramp(height: float) -> float:
+    r"""Share of a swing sole's high-in-the-air settings at ``height`` over the floor [m].
+
+    :math:`r = \mathrm{clip}((h - 0.05) / 0.05, 0, 1)`: 0 up to 5 cm (lift-offs and landings keep
+    the near-floor values), 1 from 10 cm. The ramp of the swing weights
+    (:meth:`~qpretarget.retarget.Retargeter._swing_weights`) and of the swing yaw rate.
+    """
+    return min(1.0, max(0.0, (height - 0.05) / 0.05))
+
+
 def blend_pose(a: pin.SE3, b: pin.SE3, w: float) -> pin.SE3:
     """Pose ``w`` of the way from ``a`` to ``b`` (straight line, geodesic rotation)."""
     R = a.rotation @ pin.exp3(w * pin.log3(a.rotation.T @ b.rotation))
@@ -837,7 +847,7 @@ class KinematicStepper:
             return target
         delta = wrap_angle(_yaw_of(target.rotation) - _yaw_of(prev.rotation))
         st = self.settings
-        r = min(1.0, max(0.0, (float(target.translation[2]) - self.ground - 0.05) / 0.05))
+        r = swing_height_ramp(float(target.translation[2]) - self.ground)
         rate = st.swing_yaw_rate_floor + (st.swing_yaw_rate - st.swing_yaw_rate_floor) * r
         limit = rate * self.dt
         if abs(delta) <= limit:
