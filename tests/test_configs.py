@@ -45,3 +45,27 @@ def test_cloud_config_loads(path: Path) -> None:
     from qpretarget.cloud import CloudConfig
 
     assert CloudConfig.from_yaml(path) is not None
+
+
+def test_every_shipped_config_solver_is_a_core_dependency() -> None:
+    """`pip install -e . && qpretarget demo` (the README's first command) needs no extra.
+
+    The shipped configs' solvers must come with the base install: with daqp only in the
+    `solvers` and `test` extras, a fresh environment's demo stopped with "QP solver 'daqp' is
+    not installed" (CI installs the test extra and did not see it).
+    """
+    import re
+
+    import tomllib
+    import yaml
+
+    root = Path(__file__).resolve().parents[1]
+    deps = tomllib.loads((root / "pyproject.toml").read_text())["project"]["dependencies"]
+    core = {re.split(r"[<>=!~ ;\[]", d, maxsplit=1)[0].strip().lower() for d in deps}
+    used = {
+        str((yaml.safe_load(p.read_text()).get("solver") or {}).get("name", "proxsuite")).lower()
+        for p in ALL
+    }
+    assert used, "no shipped configs found"
+    missing = sorted(used - core)
+    assert not missing, f"shipped configs use solvers that are not core dependencies: {missing}"
