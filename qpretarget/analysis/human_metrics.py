@@ -75,6 +75,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ..motion.calibration import hip_heading
 from ..robot import RobotModel, load_robot
 from ..trajectory import RobotTrajectory
 
@@ -376,7 +377,7 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
     rs = _RobotSeries(traj, robot)
 
     # Alignment at the first sample.
-    psi_h = np.unwrap(_yaw(np.cross(kp["left_hip"] - kp["right_hip"], [0.0, 0.0, 1.0])))
+    psi_h = np.unwrap(hip_heading(kp["left_hip"], kp["right_hip"]))
     psi_r = np.unwrap(_yaw(rs.pelvis_R[:, :, 0]))
     Rz = np.array(
         [
@@ -449,17 +450,20 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
         out.update(_feet_metrics(t, h_r, low_r, h_h, traj, rs))
     # Ankle displacement error.
     errs = []
+    final: dict[str, float] = {}
     for x in SIDES:
         a = f"{x}_ankle"
         if a in kp and x in rs.ankle:
             d_h = (s * (kp[a] - kp[a][0])) @ Rz.T
             d_r = rs.ankle[x] - rs.ankle[x][0]
             errs.append(np.linalg.norm(d_r - d_h, axis=1) / L_r)
+            final[x] = float(np.linalg.norm((d_r - d_h)[-1, :2]))
     if errs:
         e = np.concatenate(errs)
         out["ankle_displacement_error_legs"] = {
             "rms": float(np.sqrt(np.nanmean(e**2))),
             "max": float(np.nanmax(e)),
+            "final_m": final,
         }
     status = np.asarray(traj.status, dtype=str) if traj.status is not None else np.array([])
     out["held_ticks"] = int(np.sum(status == "held"))
@@ -591,7 +595,11 @@ def format_human_metrics(m: Mapping[str, Any]) -> list[str]:
         ]
     if "ankle_displacement_error_legs" in m:
         a = m["ankle_displacement_error_legs"]
-        lines.append(f"  ankle displ.    error RMS {a['rms']:.3f} leg lengths, max {a['max']:.3f}")
+        line = f"  ankle displ.    error RMS {a['rms']:.3f} leg lengths, max {a['max']:.3f}"
+        if a.get("final_m"):
+            ends = ", ".join(f"{x} {100 * v:.1f}" for x, v in a["final_m"].items())
+            line += f"; at the end {ends} cm"
+        lines.append(line)
     extra = f"  held ticks      {m['held_ticks']}"
     if "phase_switches_per_s" in m:
         extra += f"; human support phase switches {m['phase_switches_per_s']:.2f}/s"

@@ -114,6 +114,18 @@ def yaw_of(vector: npt.ArrayLike) -> float:
     return float(math.atan2(v[1], v[0]))
 
 
+def hip_heading(left_hip: npt.ArrayLike, right_hip: npt.ArrayLike) -> np.ndarray:
+    r"""Heading [rad] of a person from the hip line: the yaw of :math:`(l - r) \times e_z`.
+
+    The forward normal of the line from the right hip to the left one, for points ``(..., 3)``
+    (an array of the leading shape; NaN where a point is). The person's heading of the
+    human-referenced metrics (:mod:`qpretarget.analysis.human_metrics`) and of the absolute foot
+    placement (:meth:`~qpretarget.retarget.feet.FootTargets.absolute_ankle`): one definition.
+    """
+    d = np.asarray(left_hip, float) - np.asarray(right_hip, float)
+    return np.arctan2(-d[..., 0], d[..., 1])
+
+
 def rotation_z(angle: float) -> np.ndarray:
     """Rotation by ``angle`` [rad] about the world z axis, (3, 3)."""
     c, s = math.cos(angle), math.sin(angle)

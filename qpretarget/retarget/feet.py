@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from ..motion.calibration import Calibration, wrap_angle, yaw_of
+from ..motion.calibration import Calibration, hip_heading, rotation_z, wrap_angle, yaw_of
 from ..motion.phases import SIDES
 from .support import FootSupport, rot_z
 
@@ -114,6 +114,9 @@ class FootTargets:
         self.absolute = absolute
         #: side -> (robot ankle, person's ankle) at the first sample (``absolute`` placement).
         self.origin: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        #: Heading alignment of the absolute placement, person -> robot world (``start``;
+        #: ``None``: the calibration's heading).
+        self.align: np.ndarray | None = None
         #: (robot heading, person's waist turn) at the first sample [rad].
         self.heading0: tuple[float, float] | None = None
         self.calibration = calibration
@@ -170,6 +173,15 @@ class FootTargets:
             side: (self.feet.ankle_of(side, soles[side]), a.copy())
             for side, a in self.human_anchor.items()
         }
+        # The metrics' alignment: the robot's heading at the first sample minus the person's
+        # (hip line); the calibration's heading (from the waist frame) differed by 0.8 deg on
+        # the front kicks, 4 cm sideways 2.8 m away.
+        hips = kp.get("left_hip"), kp.get("right_hip")
+        self.align = None
+        if heading is not None and hips[0] is not None and hips[1] is not None:
+            psi_h = float(hip_heading(hips[0], hips[1]))
+            if math.isfinite(psi_h) and math.isfinite(heading[0]):
+                self.align = rotation_z(heading[0] - psi_h)
         psi = yaw_of(soles["left"].rotation[:, 0])
         lateral = np.array([-math.sin(psi), math.cos(psi), 0.0])
         self.width_r = float(lateral @ (soles["left"].translation - soles["right"].translation))
@@ -290,13 +302,56 @@ class FootTargets:
         r"""The scaled person's ankle in the robot's world: :math:`a_r(0) + s R_a (a(t) - a(0))`.
 
         :math:`a_r(0)` is the robot ankle and :math:`a(0)` the person's at the first sample,
-        :math:`s` the leg-length ratio and :math:`R_a` the calibration heading: the scaled
-        person of the human-referenced metrics (docs/metrics.md), so a foot put down there has
-        no ankle displacement error, whatever the earlier steps did.
+        :math:`s` the leg-length ratio and :math:`R_a = R_z(\psi_r(0) - \psi_h(0))` the heading
+        alignment at the first sample (robot heading minus the person's hip-line heading,
+        :func:`~qpretarget.motion.calibration.hip_heading`; the calibration heading when the
+        hips are unknown): the scaled person of the human-referenced metrics (docs/metrics.md),
+        so a foot put down there has no ankle displacement error, whatever the earlier steps
+        did.
         """
         a_r0, a_h0 = self.origin[side]
-        d = self.leg_scale * (self.calibration.rotation @ (np.asarray(ankle, float) - a_h0))
+        R_a = self.calibration.rotation if self.align is None else self.align
+        d = self.leg_scale * (R_a @ (np.asarray(ankle, float) - a_h0))
         return a_r0 + d
+
+    def offset(
+        self,
+        side: str,
+        kp: Mapping[str, np.ndarray],
+        soles: Mapping[str, pin.SE3],
+        scaled: Mapping[str, np.ndarray],
+        weight: float,
+    ) -> float:
+        """Horizontal distance of the robot's ankle from the scaled person's in the world [m].
+
+        The robot's ankle under its sole against :meth:`absolute_ankle`: the ankle
+        displacement error of the human-referenced metrics, in metres. ``0`` where a step
+        could not put the foot there: unless the absolute placement is used in full
+        (``weight``, :meth:`absolute_weight`, at 1), where :meth:`uncrossed` or
+        :meth:`reachable` move the person's spot by more than 1 cm (feet too close across the
+        hip line: on the playground jumps a settle step aimed there was pushed 12 cm further
+        off), or when the person's ankle or hips are unknown.
+        """
+        a = kp.get(f"{side}_ankle")
+        hips = scaled.get("left_hip"), scaled.get("right_hip")
+        if weight < 1.0 or a is None or side not in self.origin or hips[0] is None:
+            return 0.0
+        if hips[1] is None:
+            return 0.0
+        spot = self.absolute_ankle(side, a)
+        sole = soles[side]
+        if not np.all(np.isfinite(spot)):
+            return 0.0
+        target = self.uncrossed(side, spot, soles[_OTHER[side]], (hips[0], hips[1]))
+        p = target + sole.rotation @ self.feet.ankle_to_sole[side]
+        p[2] = float(sole.translation[2])
+        p = self.reachable(side, p, sole.rotation, scaled.get(f"{side}_hip"))
+        moved = p - sole.rotation @ self.feet.ankle_to_sole[side] - spot
+        if math.hypot(float(moved[0]), float(moved[1])) > 0.01:
+            return 0.0
+        d = (self.feet.ankle_of(side, sole) - spot)[:2]
+        out = math.hypot(float(d[0]), float(d[1]))
+        return out if math.isfinite(out) else 0.0
 
     def uncrossed(
         self, side: str, ankle: np.ndarray, stance: pin.SE3, hips: tuple[np.ndarray, np.ndarray]

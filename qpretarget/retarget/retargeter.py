@@ -52,6 +52,7 @@ from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
+import pinocchio as pin
 
 from ..constraints.contacts import Contacts
 from ..control.controller import Controller
@@ -705,6 +706,7 @@ class Retargeter:
     ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """Scaled key-points and the supporting ankles they are rooted at."""
         cal, state = self._cal, self.controller.state
+        standing: dict[str, np.ndarray] = {}
         if self.stepper is not None:
             # Rooted at the robot's standing feet the person stands on too (Poubel 2014 eq. 1
             # from the support foot; never the mid-ankle point while a leg is in the air), else
@@ -722,6 +724,10 @@ class Retargeter:
             use = [s for s in soles if support.get(s, True)] or list(on)
             root = "flight" if not use else "double" if len(use) == 2 else use[0]
             anchors = {s: self._fs.ankle_of(s, soles[s]) for s in use}
+            # A robot foot still standing on a foot the person lifted bounds the pelvis too
+            # (its leg must reach it): on the front kicks the pelvis target moved on over the
+            # person's landing foot, 56 cm from the robot's standing one.
+            standing = {s: self._fs.ankle_of(s, soles[s]) for s in on if s not in anchors}
         elif self.sequencer is not None:
             on = self.sequencer.contacts
             root = "double" if len(on) == 2 else on[0]
@@ -734,7 +740,7 @@ class Retargeter:
                        if f"{s}_ankle" in cal.robot_points}  # fmt: skip
         if self._rooting is None:
             raise RetargetError("not calibrated yet")
-        return self._rooting.scale(t, human, root, anchors), anchors
+        return self._rooting.scale(t, human, root, anchors, standing), anchors
 
     def _step(
         self,
@@ -797,6 +803,8 @@ class Retargeter:
             t, self._support_now, soles, desired, human_foot, flight=self._in_flight,
             toe_rise=rise, moved={s: ft.moved(s, kp) for s in SIDES},
             low={s: self.detector.height[s] < self.detector.thresholds.height_on for s in SIDES},
+            offset=self._settle_offsets(ft, kp, scaled, soles, heading),
+            hover={s: self._hovers(s) for s in SIDES},
         )  # fmt: skip
         for side in SIDES:
             if before[side] == "swing" and cmd.states[side] != "swing":
@@ -812,6 +820,34 @@ class Retargeter:
         for side, anchor in cmd.anchors.items():
             self._con.set_anchor(self._sup.feet[side].contact, anchor, moving=side in cmd.pivoting)
         return cmd
+
+    def _hovers(self, side: str) -> bool:
+        """The person holds the foot just over the floor (``stepping.handover``).
+
+        Under the detector's ``height_off``, slower than its ``speed_on``.
+        """
+        det = self.detector
+        th = det.thresholds
+        return bool(det.height[side] < th.height_off and det.speed[side] < th.speed_on)
+
+    def _settle_offsets(
+        self,
+        ft: FootTargets,
+        kp: Mapping[str, np.ndarray],
+        scaled: Mapping[str, np.ndarray],
+        soles: Mapping[str, pin.SE3],
+        heading: tuple[float, float],
+    ) -> dict[str, float] | None:
+        """Side -> robot ankle's distance from the scaled person's [m], for settle steps.
+
+        Computed only when a settle step may come (``stepping.settle_step``, both robot soles
+        in stance): :meth:`FootTargets.offset`.
+        """
+        stepper = self._stp
+        if not stepper.settings.settle_step or any(stepper.states[s] != "stance" for s in SIDES):
+            return None
+        w = ft.absolute_weight(heading)
+        return {s: ft.offset(s, kp, soles, scaled, w) for s in SIDES}
 
     @property
     def _in_flight(self) -> bool:

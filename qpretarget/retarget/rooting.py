@@ -14,7 +14,8 @@ at; :class:`Rooting` scales the person from it (Poubel 2014 eq. 1,
 * in kinematic single support the pelvis height is the person's change of height since
   calibration times the leg-length ratio, from the robot's waist height at the start of the run
   (:attr:`Rooting.waist_height`; the chain from the support foot places it horizontally);
-* no supporting leg is stretched beyond ``scaling.leg_extension`` of its length
+* no supporting leg, nor a robot leg still standing on a foot the person lifted, is stretched
+  beyond ``scaling.leg_extension`` of its length
   (:func:`~qpretarget.motion.scaling.limit_leg_extension`).
 """
 
@@ -83,8 +84,14 @@ class Rooting:
         human: Mapping[str, np.ndarray],
         root: str,
         anchors: dict[str, np.ndarray],
+        standing: Mapping[str, np.ndarray] | None = None,
     ) -> dict[str, np.ndarray]:
-        """Scaled key-points of one sample rooted at ``root`` / ``anchors``, blended."""
+        """Scaled key-points of one sample rooted at ``root`` / ``anchors``, blended.
+
+        ``standing``: side -> ankle of a robot foot on the ground that is not among the
+        ``anchors`` (the person lifted it, the robot's is still down): its leg is kept within
+        ``leg_extension`` too (:func:`~qpretarget.motion.scaling.limit_leg_extension`).
+        """
         if root == "flight" and self.root != "flight" and self.last_waist is not None:
             self.flight_root = self.last_waist
         scaled = self.scale_from(human, root, anchors)
@@ -104,7 +111,9 @@ class Rooting:
             scaled = {k: (v if k in anchors_points(anchors) else v + offset)
                       for k, v in scaled.items()}  # fmt: skip
         if self.leg_lengths and anchors and self.scaler.method == "poubel":
-            scaled, _ = limit_leg_extension(scaled, anchors, self.leg_lengths, self.leg_extension)
+            scaled, _ = limit_leg_extension(
+                scaled, anchors, self.leg_lengths, self.leg_extension, standing
+            )
         self.last_waist = (scaled["waist"].copy(), np.asarray(human["waist"], float).copy())
         return scaled
 

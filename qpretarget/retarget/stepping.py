@@ -57,6 +57,13 @@ CONTACT_STATES = frozenset({"stance", "tiptoe"})
 #: giving with this guard; without it the next landing made the contacts give).
 PIVOT_SWING_MAX = 0.25
 
+#: How long the person holds a foot just over the floor before it is put down for a re-step of
+#: the other (``handover``) [s].
+HOVER_TIME = 0.2
+
+#: Longest wait of a foot put down for a re-step (``handover``) for that re-step [s].
+HANDOVER_TIMEOUT = 0.6
+
 #: A heel rising while the stance anchor pivots stops the pivot, to roll the sole onto its
 #: toes, when the pivot can stop within this time at ``pivot_accel`` [s]: a slow turn before a
 #: hop, not a dancer spinning on the ball of the foot (stopping every pivot to roll: the dance
@@ -65,8 +72,11 @@ TIPTOE_STOP = 0.05
 
 #: The switches of :class:`StepSettings` (every other setting is a positive number).
 BOOL_SETTINGS = frozenset(
-    {"pivot", "pivot_double", "initial_stance", "toe_off", "tiptoe", "absolute", "takeoff"}
-)
+    {
+        "pivot", "pivot_double", "initial_stance", "toe_off", "tiptoe", "absolute", "takeoff",
+        "settle_step", "handover",
+    }
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -126,6 +136,27 @@ class StepSettings:
             detected lift (both its ankle and toe, scaled: a shuffle under the detector's lift
             height, a slide) steps there [m]: lifted at least ``lift_time``, put down where
             the person's foot is.
+        settle_step: Whether a stance foot put down away from the person's foot steps there
+            once the person stands still: while the person has stood on both feet for
+            ``settle_time`` (and the robot on both soles as long), the robot foot whose ankle is
+            furthest from the scaled person's (more than ``restep``, horizontally, with the
+            absolute placement in full: the robot's heading within 30 deg of the person's) is
+            lifted at least ``lift_time`` and put down there, once per stance of the person's
+            foot. Its swing stays at ``clearance``, under the 3 cm of a counted step. Why: a
+            landing the legs could not reach in time (a long stride back out of a kick) kept
+            its offset until the foot's next step, for seconds when the person stands still
+            after it (the front kicks' last 3 s, 5-9 cm).
+        settle_time: How long the person stands still on both feet before a settle step [s].
+        handover: Whether a swing foot the person holds just over the floor is put down so that
+            the standing foot can re-step: when the person's standing foot moved more than
+            ``restep`` (a slide, on the ball of the foot) while the other foot hovers (the
+            person's foot under the detector's ``height_off``, slower than ``speed_on``, for
+            :data:`HOVER_TIME`, the robot's sole within ``clearance`` + 1 cm of the floor),
+            the hovering foot lands, the standing foot steps to the person's, and the first
+            one lifts again (after at most :data:`HANDOVER_TIMEOUT` if no re-step comes). A
+            robot cannot slide a standing foot; without a second foot down it cannot step
+            either: on the dance spin the person slid a foot 13-16 cm with the other 3 cm up,
+            and the robot's stayed there for 1.9 s, to the end.
         initial_stance: Start the run in the person's first-sample stance (the soles where the
             scaled person's feet are, solved to convergence before the first tick,
             :func:`~qpretarget.retarget.feet.initial_soles`; on one foot, the other raised,
@@ -206,6 +237,9 @@ class StepSettings:
     tiptoe_rate: float = 10.0
     tiptoe_accel: float = 200.0
     restep: float = 0.05
+    settle_step: bool = True
+    settle_time: float = 0.5
+    handover: bool = True
     absolute: bool = True
     flight_foot_weight: float = 0.1
     swing_orientation_weight: float = 0.1
@@ -384,6 +418,15 @@ class KinematicStepper:
         self._toe_down: set[str] = set()
         self._toe_armed: set[str] = set()
         self._restep: set[str] = set()
+        #: Since when the person has stood on both feet (``None``: not now).
+        self._both_since: float | None = None
+        #: Sides that made their settle step during the person's current stance of that foot.
+        self._settled: set[str] = set()
+        #: side -> [time it was put down for the other's re-step, that re-step started]
+        #: (``handover``).
+        self._handover: dict[str, list] = {}
+        #: side -> since when the person holds that foot just over the floor.
+        self._hover_since: dict[str, float] = {}
         #: side -> pitch of a tiptoe anchor about the sole's front edge [rad].
         self._roll: dict[str, float] = {}
         #: side -> pitch rate of a tiptoe anchor [rad/s] (ramped by ``tiptoe_accel``).
@@ -432,6 +475,8 @@ class KinematicStepper:
         self._pivot_double = set()
         self._omega, self._yaw_u = {}, {}
         self._toe_down, self._toe_armed, self._restep = set(), set(), set()
+        self._both_since, self._settled = None, set()
+        self._handover, self._hover_since = {}, {}
         self._roll, self._roll_rate = {}, {}
         for side in SIDES:
             if side not in standing:
@@ -455,6 +500,8 @@ class KinematicStepper:
         toe_rise: Mapping[str, float] | None = None,
         moved: Mapping[str, float] | None = None,
         low: Mapping[str, bool] | None = None,
+        offset: Mapping[str, float] | None = None,
+        hover: Mapping[str, bool] | None = None,
     ) -> StepCommand:
         """Advance every foot by one tick.
 
@@ -477,6 +524,13 @@ class KinematicStepper:
                 foot is up rolls the sole onto its toes (tiptoe) only while that foot is not
                 low (a hop's push-off, not a walk's heel-off just before the other foot
                 lands, which is a toe-off once the other foot stands). ``None``: never low.
+            offset: side -> horizontal distance of the robot's ankle from the scaled person's
+                in the world [m] (:meth:`~qpretarget.retarget.feet.FootTargets.offset`; 0 where
+                the absolute placement is not in full): settle steps (``settle_step``).
+                ``None``: none.
+            hover: side -> the person holds that foot just over the floor (under the
+                detector's ``height_off``, slower than its ``speed_on``): ``handover``.
+                ``None``: never.
 
         Returns:
             The :class:`StepCommand` of this tick.
@@ -489,9 +543,11 @@ class KinematicStepper:
             flight = not any(human_support.get(s, True) for s in SIDES)
         anchors: dict[str, pin.SE3] = {}
         pivoting: set[str] = set()
+        settle = self._settle_side(t, human_support, flight, offset)
+        self._update_handover(t, human_support, soles, flight, moved, hover)
         for side in SIDES:
             state = self.states[side]
-            up = not human_support.get(side, True)
+            up = not human_support.get(side, True) and side not in self._handover
             other_state = self.states[_OTHER[side]]
             other_stands = other_state == "stance"
             rise = (toe_rise or {}).get(side, 0.0)
@@ -520,6 +576,9 @@ class KinematicStepper:
             if state == "stance":
                 settled = t - self._since[side] >= st.min_stance
                 restep = not up and (moved or {}).get(side, 0.0) > st.restep
+                if side == settle and settled:
+                    restep = True
+                    self._settled.add(side)
                 lift_ok = other_state in ("stance", "toe_off", "tiptoe") or flight
                 if (up or restep) and lift_ok and settled:
                     self._enter(t, side, "swing")
@@ -667,7 +726,9 @@ class KinematicStepper:
                 elif not up:
                     self._restep.discard(side)
                     self._enter(t, side, "landing")
-                    d = desired[side]
+                    # Put down where the person's foot is; a foot put down for the other's
+                    # re-step (handover) straight under itself.
+                    d = soles[side] if side in self._handover else desired[side]
                     p = np.array([d.translation[0], d.translation[1], self.ground])
                     self._landing[side] = _flat(_yaw_of(d.rotation), p)
             elif state == "landing":
@@ -854,6 +915,86 @@ class KinematicStepper:
             return target
         turn = pin.exp3(np.array([0.0, 0.0, math.copysign(limit, delta) - delta]))
         return pin.SE3(turn @ target.rotation, target.translation.copy())
+
+    def _settle_side(
+        self,
+        t: float,
+        human_support: Mapping[str, bool],
+        flight: bool,
+        offset: Mapping[str, float] | None,
+    ) -> str | None:
+        """The side that makes a settle step this tick (``settle_step``), or ``None``.
+
+        Both robot soles flat in stance, still (not pivoting) and for ``settle_time``; the
+        person on both feet as long; the robot ankle furthest from the person's, beyond
+        ``restep``, that has not made its settle step in the person's current stance.
+        """
+        st = self.settings
+        for side in SIDES:
+            if not human_support.get(side, True):
+                self._settled.discard(side)
+        if flight or not all(human_support.get(s, True) for s in SIDES):
+            self._both_since = None
+            return None
+        if self._both_since is None:
+            self._both_since = t
+        if not st.settle_step or not offset or t - self._both_since < st.settle_time:
+            return None
+        if any(
+            self.states[s] != "stance" or s in self._omega or t - self._since[s] < st.settle_time
+            for s in SIDES
+        ):
+            return None
+        side = max(SIDES, key=lambda s: offset.get(s, 0.0))
+        if offset.get(side, 0.0) <= st.restep or side in self._settled:
+            return None
+        return side
+
+    def _update_handover(
+        self,
+        t: float,
+        human_support: Mapping[str, bool],
+        soles: Mapping[str, pin.SE3],
+        flight: bool,
+        moved: Mapping[str, float] | None,
+        hover: Mapping[str, bool] | None,
+    ) -> None:
+        """Start and end the feet put down for the other's re-step (``handover``).
+
+        A foot put down stays down (as if the person stood on it) until the other foot's
+        re-step has landed, the person puts it down or flies, or :data:`HANDOVER_TIMEOUT`
+        passed without the re-step starting.
+        """
+        st = self.settings
+        for side in list(self._handover):
+            record, other = self._handover[side], _OTHER[side]
+            if human_support.get(side, True) or flight:
+                del self._handover[side]
+            elif self.states[other] in ("swing", "landing"):
+                record[1] = True
+            elif record[1] or t - record[0] > HANDOVER_TIMEOUT:
+                del self._handover[side]  # the re-step landed, or none came
+        for side in SIDES:
+            if (hover or {}).get(side, False):
+                self._hover_since.setdefault(side, t)
+            else:
+                self._hover_since.pop(side, None)
+        if not st.handover or flight or not moved:
+            return
+        for side in SIDES:
+            other = _OTHER[side]
+            if (
+                side in self._handover
+                or self.states[side] != "swing"
+                or human_support.get(side, True)
+                or self.states[other] != "stance"
+                or t - self._since[side] < st.lift_time
+                or moved.get(other, 0.0) <= st.restep
+                or t - self._hover_since.get(side, t) < HOVER_TIME - 1e-12
+                or float(soles[side].translation[2]) - self.ground > st.clearance + 0.01
+            ):
+                continue
+            self._handover[side] = [t, False]
 
     def _enter(self, t: float, side: str, state: str) -> None:
         self.states[side] = state

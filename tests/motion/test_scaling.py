@@ -19,7 +19,7 @@ from qpretarget.motion.calibration import (
     triad,
 )
 from qpretarget.motion.keypoints import keypoint_orientations, keypoint_positions
-from qpretarget.motion.scaling import Scaler, limit_leg_extension
+from qpretarget.motion.scaling import LOWEST_HIP, Scaler, limit_leg_extension
 from qpretarget.retarget.retargeter import default_robot_keypoints
 from qpretarget.robot import load_robot
 
@@ -234,3 +234,30 @@ def test_leg_extension_limit_lowers_the_body_only_as_needed(g1_points):
     again, dz2 = limit_leg_extension(out, anchors, legs, 0.92)
     assert dz2 == pytest.approx(0.0, abs=1e-12)
     assert all(np.array_equal(again[k], out[k]) for k in out)
+
+
+def test_a_robot_leg_still_standing_bounds_the_body_but_its_foot_points_move_with_it(g1_points):
+    scaled = {k: v.copy() for k, v in g1_points.items()}
+    legs = {"left": 0.6229, "right": 0.6229}
+    # The person stands on the right foot only; the robot's left still stands 20 cm behind.
+    anchors = {"right": g1_points["right_ankle"]}
+    left = g1_points["left_ankle"] - np.array([0.2, 0.0, 0.0])
+    alone, dz0 = limit_leg_extension(scaled, anchors, legs, 0.92)
+    out, dz = limit_leg_extension(scaled, anchors, legs, 0.92, standing={"left": left})
+    assert dz > dz0  # the left leg, further from its hip, needs the body lower
+    assert np.linalg.norm(out["left_hip"] - left) <= 0.92 * legs["left"] + 1e-12
+    assert np.array_equal(out["right_ankle"], anchors["right"])  # the support stays
+    # The standing robot foot is not a support of the scaling: the person's (lifted) left foot
+    # points move down with the body.
+    assert np.allclose(out["left_ankle"], scaled["left_ankle"] - [0, 0, dz])
+
+
+def test_a_hip_beyond_the_reach_sideways_is_lowered_to_a_squat_not_to_the_floor(g1_points):
+    scaled = {k: v.copy() for k, v in g1_points.items()}
+    legs = {"left": 0.6229, "right": 0.6229}
+    # A support 0.8 m from its hip horizontally: no height brings it within 0.92 of the leg.
+    far = g1_points["left_ankle"] - np.array([0.8, 0.0, 0.0])
+    out, dz = limit_leg_extension(scaled, {"left": far}, legs, 0.92)
+    hip_height = out["left_hip"][2] - far[2]
+    assert hip_height == pytest.approx(LOWEST_HIP * 0.92 * legs["left"], abs=1e-12)
+    assert hip_height > 0.25

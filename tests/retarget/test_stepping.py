@@ -454,6 +454,135 @@ def test_a_foot_the_person_moves_without_a_detected_lift_steps_there():
     assert cmd.states["left"] == "stance"
 
 
+def test_a_foot_put_down_off_the_persons_spot_settles_there_once_the_person_stands_still():
+    settings = StepSettings()
+    st = KinematicStepper(settings, dt=0.01)
+    soles = {"left": _flat(0, 0.1, 0), "right": _flat(0, -0.1, 0)}
+    both = {"left": True, "right": True}
+    desired = {"left": soles["left"], "right": _flat(0.08, -0.1, 0.0)}
+    off = {"left": 0.02, "right": 0.08}  # the robot's right ankle 8 cm from the person's
+
+    def tick(k: int, offset=off, support=both):
+        return st.update(0.01 * k, support, soles, desired, {}, offset=offset)
+
+    # Not before the person has stood still on both feet for settle_time (0.5 s).
+    for k in range(0, 50):
+        assert tick(k).states["right"] == "stance"
+    # Then the foot furthest off (beyond restep, 5 cm) steps, held up lift_time, and goes down
+    # on the person's spot; its swing target stays at the clearance (not a counted step).
+    cmd = tick(50)
+    assert cmd.states == {"left": "stance", "right": "swing"} and cmd.contacts == ("left",)
+    for k in range(51, 61):
+        cmd = tick(k)
+        assert cmd.states["right"] == "swing"
+        assert cmd.feet["right"].translation[2] <= settings.clearance + 1e-12
+    assert tick(61).states["right"] == "landing"
+    assert np.allclose(st.landing_spot("right").translation, [0.08, -0.1, 0.0])
+    soles["right"] = _flat(0.08, -0.1, 0.0)
+    assert tick(62).states["right"] == "stance"
+    # Once per stance of the person's foot: still off (a spot the leg could not reach), no
+    # second settle step ...
+    for k in range(63, 200):
+        assert tick(k).states["right"] == "stance"
+    # ... until the person lifts that foot and puts it down again.
+    tick(200, support={"left": True, "right": False})
+    assert st.states["right"] == "swing"
+
+
+@pytest.mark.parametrize(
+    ("offset", "why"),
+    [
+        ({"left": 0.0, "right": 0.04}, "under restep"),
+        ({"left": 0.0, "right": 0.0}, "the person's spot out of reach (offset 0)"),
+    ],
+)
+def test_no_settle_step_near_the_persons_spot_or_when_it_cannot_be_reached(offset, why):
+    st = KinematicStepper(StepSettings(), dt=0.01)
+    soles = {"left": _flat(0, 0.1, 0), "right": _flat(0, -0.1, 0)}
+    both = {"left": True, "right": True}
+    for k in range(0, 150):
+        cmd = st.update(0.01 * k, both, soles, soles, {}, offset=offset)
+        assert cmd.states == {"left": "stance", "right": "stance"}, why
+
+
+def test_no_settle_step_while_the_person_steps_or_when_switched_off():
+    soles = {"left": _flat(0, 0.1, 0), "right": _flat(0, -0.1, 0)}
+    off = {"left": 0.0, "right": 0.1}
+    # The person's double supports in a walk are short (0.1 s here, each foot up 0.1 s every
+    # 0.4 s): the clock restarts at every lift, and no foot swings while the person stands on it.
+    st = KinematicStepper(StepSettings(), dt=0.01)
+    for k in range(0, 300):
+        support = {"right": not 0 <= k % 40 < 10, "left": not 20 <= k % 40 < 30}
+        st.update(0.01 * k, support, soles, soles, {}, offset=off)
+        for side in ("left", "right"):
+            assert not (st.states[side] == "swing" and support[side])
+    st = KinematicStepper(StepSettings(settle_step=False), dt=0.01)
+    for k in range(0, 150):
+        cmd = st.update(0.01 * k, {"left": True, "right": True}, soles, soles, {}, offset=off)
+        assert cmd.states["right"] == "stance"
+
+
+def test_a_hovering_foot_is_put_down_so_that_the_other_can_restep():
+    settings = StepSettings()
+    st = KinematicStepper(settings, dt=0.01)
+    soles = {"left": _flat(0, 0.1, 0), "right": _flat(0, -0.1, 0)}
+    desired = {"left": _flat(0.12, 0.1, 0.0), "right": _flat(0.0, -0.1, 0.02)}
+    left_only = {"left": True, "right": False}
+    st.update(0.0, {"left": True, "right": True}, soles, desired, {})
+    cmd = st.update(0.1, left_only, soles, desired, {})
+    assert cmd.states["right"] == "swing"
+    soles["right"] = _flat(0.0, -0.1, 0.02)  # held 2 cm up, as the person's foot
+
+    def tick(k: int, moved: float, hover: bool = True):
+        return st.update(
+            0.01 * k, left_only, soles, desired, {}, moved={"left": moved, "right": 0.0},
+            hover={"left": False, "right": hover},
+        )  # fmt: skip
+
+    # The person's standing foot slides 12 cm (on the ball of the foot) while the other hovers:
+    # nothing before the hover lasted HOVER_TIME (0.2 s) ...
+    for k in range(11, 30):
+        assert tick(k, 0.12).states["right"] == "swing"
+    # ... then the hovering foot is put down straight under itself ...
+    cmd = tick(31, 0.12)
+    assert cmd.states["right"] == "landing"
+    assert np.allclose(st.landing_spot("right").translation, [0.0, -0.1, 0.0])
+    soles["right"] = _flat(0.0, -0.1, 0.0)
+    assert tick(32, 0.12).states["right"] == "stance"
+    # ... the standing foot re-steps to the person's spot (the hovering one stays down) ...
+    cmd = tick(38, 0.12)
+    assert cmd.states == {"left": "swing", "right": "stance"}
+    for k in range(39, 49):
+        assert tick(k, 0.12).states["right"] == "stance"
+    assert tick(49, 0.12).states["left"] == "landing"
+    soles["left"] = _flat(0.12, 0.1, 0.0)
+    assert tick(50, 0.0).states["left"] == "stance"
+    # ... and once it stands, the other goes up again with the person's.
+    for k in range(51, 60):
+        tick(k, 0.0)
+    assert st.states == {"left": "stance", "right": "swing"}
+
+
+def test_no_handover_for_a_foot_held_up_or_without_a_slide():
+    left_only = {"left": True, "right": False}
+    slide, hovering = {"left": 0.12, "right": 0.0}, {"left": False, "right": True}
+    cases = [
+        (StepSettings(), {"left": 0.03, "right": 0.0}, hovering, 0.02, "no slide"),
+        (StepSettings(), slide, {"left": False, "right": False}, 0.02, "not hovering"),
+        (StepSettings(), slide, hovering, 0.06, "the robot's foot 6 cm up"),
+        (StepSettings(handover=False), slide, hovering, 0.02, "switched off"),
+    ]
+    for settings, moved, hover, height, why in cases:
+        st = KinematicStepper(settings, dt=0.01)
+        soles = {"left": _flat(0, 0.1, 0), "right": _flat(0, -0.1, 0)}
+        st.update(0.0, {"left": True, "right": True}, soles, soles, {})
+        st.update(0.1, left_only, soles, soles, {})  # the right foot lifts ...
+        soles["right"] = _flat(0, -0.1, height)  # ... and is held there
+        for k in range(11, 100):
+            st.update(0.01 * k, left_only, soles, soles, {}, moved=moved, hover=hover)
+            assert st.states == {"left": "stance", "right": "swing"}, why
+
+
 def test_the_initial_stance_is_the_persons_first_stance():
     from qpretarget.retarget.feet import INITIAL_STRIDE, initial_soles
 
@@ -735,15 +864,22 @@ def test_kicks_lift_the_robot_foot():
     # the ankle pitch stopped at its -0.87 rad limit).
     assert m["swing_height_ratio"]["lifts"] >= 3
     assert m["swing_height_ratio"]["min"] >= 0.7
-    # Ankle displacement error: 0.127 leg lengths measured (0.128 before the swing yaw rate
-    # limit and the pivots with both feet down; 0.138 with swing targets kept
+    # Ankle displacement error: 0.106 leg lengths measured (0.109 while a robot leg still
+    # standing on a foot the person lifted did not bound the pelvis, 0.114 without the settle
+    # steps,
+    # 0.127 before the absolute placement took the metrics' heading alignment, 0.128 before the
+    # swing yaw rate limit and the pivots with both feet down; 0.138 with swing targets kept
     # within the standing legs' 0.92 of the leg length instead of stepping.swing_reach 0.97,
     # 0.156 with the 0.2 mm self-collision trust region, 0.177 before the contacts'
     # corrector step and plane_trust; 0.69 while each landing was placed by the person's
     # stride from the robot's standing foot: a kick landing 0.5 m short was carried into every
-    # later step). Issue 15 asks 0.10: not met (docs/retargeting.md). Bound 0.15: the figure
+    # later step). Issue 15 asks 0.10: not met (docs/retargeting.md). Bound 0.12: the figure
     # moves by about 0.01 with any change of the run.
-    assert m["ankle_displacement_error_legs"]["rms"] <= 0.15
+    assert m["ankle_displacement_error_legs"]["rms"] <= 0.12
+    # The person stands still on both feet for the last 3 s: the robot's feet end where the
+    # person's do (settle steps, stepping.settle_step): 1.7 / 2.9 cm measured, 3.8 / 9.3 before
+    # (the last kick's landing, 8 cm off, kept to the end). Bound 4 cm.
+    assert max(m["ankle_displacement_error_legs"]["final_m"].values()) <= 0.04
     assert m["swing_height_ratio"]["median"] >= 0.7
     assert m["stance_slip_mm"]["max"] < 1.0  # horizontal, as evaluate's foot_slip
     # A kicking sole coming down fast stays above the floor (sole_ground rows: 15 mm under it
@@ -790,13 +926,23 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
         # (swing_orientation_weight, flight_foot_weight).
         assert m["pelvis_tilt_error_deg"]["max"] <= 15.0
         assert m["pelvis_tilt_error_deg"]["rms"] <= 5.0
+        # Ankle displacement error: 0.126 measured (0.133 before a hovering foot was put down
+        # for the other's re-step, stepping.handover: the person slides the left foot 13-16 cm
+        # on its ball with the right 3 cm up, at 1.6 s and from 7.6 s to the end). Issue 15
+        # asks 0.10: not met (docs/retargeting.md). Bound 0.14 (chaotic, about 0.01). The left
+        # foot ends 7.6 cm from the person's (15.3 before; the person's feet end 0.72 m apart,
+        # wider than the robot's legs reach): bound 12 cm.
+        assert m["ankle_displacement_error_legs"]["rms"] <= 0.14
+        assert m["ankle_displacement_error_legs"]["final_m"]["left"] <= 0.12
     else:
         # The kata's steps: 14 for the person's 15 (14-15 with any change of the run, 15 at stop 30, 14 at stop 28; 15-16 before the pivots'
         # ramp went from 50 to 100 rad/s^2; 8 before a foot the person moves without a detected
         # lift re-steps, 12 with toe-offs alone, 13-14 before the stance feet pivoted).
         assert m["steps_total"]["robot"] >= 14
-        # Ankle displacement error: 0.129 measured (0.130 before the pivots with both feet
-        # down; 0.158 with swing targets kept within the
+        # Ankle displacement error: 0.123 measured (0.129 before the settle steps and the
+        # metrics' heading alignment of the absolute placement, 0.148 with that alignment
+        # alone; 0.130 before the pivots with both feet down; 0.158 with swing targets kept
+        # within the
         # standing legs' 0.92 of the leg length, stepping.swing_reach). Issue 15 asks 0.10:
         # not met (docs/retargeting.md). Bound 0.15: the chaotic clip moves by about 0.01.
         assert m["ankle_displacement_error_legs"]["rms"] <= 0.15
