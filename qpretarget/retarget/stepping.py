@@ -90,6 +90,13 @@ class StepSettings:
         land_speed: Largest descent speed of a landing sole [m/s].
         land_reach: A landing sole goes down once this close (horizontally) to its spot [m].
         land_timeout: After this long landing, a sole within 5 ``land_height`` is put down [s].
+        land_wait: A landing sole that has not reached its spot goes down where it is, as
+            after ``land_timeout``, once it has been landing this long while the person has
+            already lifted the other foot [s]: the robot's other foot cannot follow the
+            person's step before this one stands. On the front kicks the person steps the
+            standing foot 0.1-0.3 s after putting the kicking one down 80-90 cm in front of it,
+            a spot the robot's leg reaches only slowly (ankle rolls at their limits), and that
+            step came 0.3 s late (ankle error 0.106 -> 0.095 leg lengths).
         min_stance: Shortest stance before a foot may lift again [s] (no flicker).
         lift_time: The swing target blends from the lift-off pose over this time [s].
         pivot_yaw: Turn of the person's stance foot that starts a pivot [rad] (15 deg).
@@ -219,6 +226,7 @@ class StepSettings:
     land_speed: float = 0.5
     land_reach: float = 0.02
     land_timeout: float = 0.3
+    land_wait: float = 0.1
     min_stance: float = 0.05
     lift_time: float = 0.1
     pivot_yaw: float = math.radians(15.0)
@@ -737,7 +745,10 @@ class KinematicStepper:
                 else:
                     sole = soles[side]
                     h = float(sole.translation[2]) - self.ground
-                    late = t - self._since[side] >= st.land_timeout
+                    late = t - self._since[side] >= st.land_timeout or (
+                        not human_support.get(_OTHER[side], True)
+                        and t - self._since[side] >= st.land_wait
+                    )
                     if h <= st.land_height or (late and h <= 5.0 * st.land_height):
                         self._enter(t, side, "stance")
                         anchor = _flat(
@@ -784,7 +795,12 @@ class KinematicStepper:
                 z_prev = float(prev.translation[2])
                 miss = float(np.linalg.norm(soles[side].translation[:2] - land.translation[:2]))
                 late = t - self._since[side] >= st.land_timeout
-                step = st.land_speed * self.dt if miss <= st.land_reach or late else 0.0
+                waited = not human_support.get(_OTHER[side], True) and (
+                    t - self._since[side] >= st.land_wait
+                )
+                step = (
+                    st.land_speed * self.dt if miss <= st.land_reach or late or waited else 0.0
+                )
                 z = max(self.ground, z_prev - step)
                 target = pin.SE3(land.rotation.copy(), np.array([*land.translation[:2], z]))
                 feet[side] = target
