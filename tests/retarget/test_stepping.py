@@ -1108,7 +1108,9 @@ def test_rising_on_the_toes_to_reach_up_rolls_the_soles_with_their_contacts():
 
 # Excerpts: a walk's first steps; a jump's two-foot push-off into flight (the take-off
 # anticipated); a rise on the toes (tiptoe) into a hop; a run that starts on one foot (the
-# initial stance with the other raised).
+# initial stance with the other raised); a slide on one foot with the other hovering (the
+# hovering foot put down, stepping.handover); kicks with a landing put down after land_wait and
+# a settle step once the person stands still.
 @pytest.mark.parametrize(
     "clip, start, end",
     [
@@ -1116,6 +1118,8 @@ def test_rising_on_the_toes_to_reach_up_rolls_the_soles_with_their_contacts():
         ("cgspeed_cmu_01_01_playground_jumps.bvh", 12.0, 13.2),
         ("cmu_14_07_reach_up_tiptoe.bvh", 6.0, 7.2),
         ("cmu_49_18_one_leg_balance.bvh", 0.0, 1.0),
+        ("cmu_131_04_dance_spin.bvh", 1.0, 2.4),
+        ("cmu_135_04_front_kicks.bvh", 6.5, 8.8),
     ],
 )
 def test_online_push_equals_offline_causal_with_contacts_switching(clip, start, end):
@@ -1129,6 +1133,12 @@ def test_online_push_equals_offline_causal_with_contacts_switching(clip, start, 
         assert states.index("swing/swing") < phases.index("flight")
     if "reach_up" in clip:
         assert "tiptoe/tiptoe" in states
+    both = [k for k, (st, ph) in enumerate(zip(states, phases, strict=True)) if ph == "double"]
+    if "spin" in clip:  # the person on the left foot, the robot's right put down for a re-step
+        pairs = zip(states, phases, strict=True)
+        assert any(st == "stance/stance" and ph == "left" for st, ph in pairs)
+    if "kicks" in clip:  # a foot lifted while the person stands still on both (settle step)
+        assert any(states[k] in ("swing/stance", "stance/swing") for k in both)
     rt.start(motion)
     commands = []
     for k in range(len(motion)):
