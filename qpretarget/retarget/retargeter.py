@@ -803,7 +803,7 @@ class Retargeter:
             t, self._support_now, soles, desired, human_foot, flight=self._in_flight,
             toe_rise=rise, moved={s: ft.moved(s, kp) for s in SIDES},
             low={s: self.detector.height[s] < self.detector.thresholds.height_on for s in SIDES},
-            offset=self._settle_offsets(ft, kp, scaled, soles, heading),
+            offset=self._settle_offsets(t, ft, kp, scaled, soles, heading),
             hover={s: self._hovers(s) for s in SIDES},
         )  # fmt: skip
         for side in SIDES:
@@ -832,6 +832,7 @@ class Retargeter:
 
     def _settle_offsets(
         self,
+        t: float,
         ft: FootTargets,
         kp: Mapping[str, np.ndarray],
         scaled: Mapping[str, np.ndarray],
@@ -840,11 +841,11 @@ class Retargeter:
     ) -> dict[str, float] | None:
         """Side -> robot ankle's distance from the scaled person's [m], for settle steps.
 
-        Computed only when a settle step may come (``stepping.settle_step``, both robot soles
-        in stance): :meth:`FootTargets.offset`.
+        Computed only when a settle step may come
+        (:meth:`~qpretarget.retarget.stepping.KinematicStepper.settle_possible`):
+        :meth:`FootTargets.offset`.
         """
-        stepper = self._stp
-        if not stepper.settings.settle_step or any(stepper.states[s] != "stance" for s in SIDES):
+        if not self._stp.settle_possible(t):
             return None
         w = ft.absolute_weight(heading)
         return {s: ft.offset(s, kp, soles, scaled, w) for s in SIDES}

@@ -932,6 +932,22 @@ class KinematicStepper:
         turn = pin.exp3(np.array([0.0, 0.0, math.copysign(limit, delta) - delta]))
         return pin.SE3(turn @ target.rotation, target.translation.copy())
 
+    def settle_possible(self, t: float) -> bool:
+        """Whether a settle step may come at ``t`` (``settle_step``).
+
+        The person has stood on both feet, and the robot on both soles, for ``settle_time`` up
+        to the last tick: the caller computes the offsets :meth:`update` needs only then.
+        """
+        st = self.settings
+        if not st.settle_step or self._both_since is None or len(self._settled) == len(SIDES):
+            return False
+        if t - self._both_since < st.settle_time - self.dt - 1e-12:
+            return False
+        return all(
+            self.states[s] == "stance" and t - self._since[s] >= st.settle_time - 1e-12
+            for s in SIDES
+        )
+
     def _settle_side(
         self,
         t: float,
