@@ -9,8 +9,9 @@ at; :class:`Rooting` scales the person from it (Poubel 2014 eq. 1,
 * when the root changes, the waist offset between the old and the new root's scaling decays
   over ``scaling.blend_time`` (minimum jerk);
 * in flight (kinematic mode) the waist moves horizontally from where it left the ground like the
-  person's, times the calibration's root scale, and its height is the person's change of height
-  since calibration times the leg-length ratio (as in single support);
+  person's, times the leg-length ratio (the scaled person of the human-referenced metrics; the
+  calibration's root scale outside the kinematic mode), and its height is the person's change
+  of height since calibration times the leg-length ratio (as in single support);
 * in kinematic single support the pelvis height is the person's change of height since
   calibration times the leg-length ratio, from the robot's waist height at the start of the run
   (:attr:`Rooting.waist_height`; the chain from the support foot places it horizontally);
@@ -124,7 +125,11 @@ class Rooting:
         cal = self.calibration
         if root == "flight" and self.flight_root is not None:
             w_r, w_h = self.flight_root
-            waist = w_r + cal.root_scale * (cal.rotation @ (human["waist"] - w_h))
+            # Horizontally the person's travel times the leg-length ratio in the kinematic mode
+            # (the scaled person of the metrics and of the absolute foot placement), else the
+            # calibration's root scale.
+            k = self.leg_scale if self.kinematic else cal.root_scale
+            waist = w_r + k * (cal.rotation @ (human["waist"] - w_h))
             if self.kinematic:
                 # Height: the person's since calibration times the leg-length ratio, as in
                 # single support, not from where the robot left the ground: a hop starts on the
