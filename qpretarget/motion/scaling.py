@@ -251,6 +251,12 @@ class Scaler:
         return self.scale_rooted(human, "waist", waist)
 
 
+#: Lowest hip height above a supporting ankle that :func:`limit_leg_extension` asks for, as a
+#: share of the allowed reach: where the hip is beyond the reach horizontally, the pelvis target
+#: dropped to the ankle's height (0.15 m on the front kicks at 7.45 s).
+LOWEST_HIP = 0.5
+
+
 def limit_leg_extension(
     scaled: Mapping[str, np.ndarray],
     supports: Mapping[str, np.ndarray],
@@ -303,12 +309,6 @@ def limit_leg_extension(
     fixed = {f"{side}_{p}" for side in supports for p in ("ankle", "toe", "heel")}
     down = np.array([0.0, 0.0, dz])
     return {k: (v if k in fixed else v - down) for k, v in scaled.items()}, dz
-
-
-#: Lowest hip height above a supporting ankle that :func:`limit_leg_extension` asks for, as a
-#: share of the allowed reach: where the hip is beyond the reach horizontally, the pelvis target
-#: dropped to the ankle's height (0.15 m on the front kicks at 7.45 s).
-LOWEST_HIP = 0.5
 
 
 __all__ = ["LOWEST_HIP", "SCALING_METHODS", "Scaler", "limit_leg_extension"]

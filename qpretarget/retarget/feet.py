@@ -333,16 +333,14 @@ class FootTargets:
         off), or when the person's ankle or hips are unknown.
         """
         a = kp.get(f"{side}_ankle")
-        hips = scaled.get("left_hip"), scaled.get("right_hip")
-        if weight < 1.0 or a is None or side not in self.origin or hips[0] is None:
-            return 0.0
-        if hips[1] is None:
+        left, right = scaled.get("left_hip"), scaled.get("right_hip")
+        if weight < 1.0 or a is None or side not in self.origin or left is None or right is None:
             return 0.0
         spot = self.absolute_ankle(side, a)
         sole = soles[side]
         if not np.all(np.isfinite(spot)):
             return 0.0
-        target = self.uncrossed(side, spot, soles[_OTHER[side]], (hips[0], hips[1]))
+        target = self.uncrossed(side, spot, soles[_OTHER[side]], (left, right))
         p = target + sole.rotation @ self.feet.ankle_to_sole[side]
         p[2] = float(sole.translation[2])
         p = self.reachable(side, p, sole.rotation, scaled.get(f"{side}_hip"))

@@ -745,10 +745,7 @@ class KinematicStepper:
                 else:
                     sole = soles[side]
                     h = float(sole.translation[2]) - self.ground
-                    late = t - self._since[side] >= st.land_timeout or (
-                        not human_support.get(_OTHER[side], True)
-                        and t - self._since[side] >= st.land_wait
-                    )
+                    late = self._landing_late(t, side, human_support)
                     if h <= st.land_height or (late and h <= 5.0 * st.land_height):
                         self._enter(t, side, "stance")
                         anchor = _flat(
@@ -794,13 +791,8 @@ class KinematicStepper:
                 prev = self._target.get(side, soles[side])
                 z_prev = float(prev.translation[2])
                 miss = float(np.linalg.norm(soles[side].translation[:2] - land.translation[:2]))
-                late = t - self._since[side] >= st.land_timeout
-                waited = not human_support.get(_OTHER[side], True) and (
-                    t - self._since[side] >= st.land_wait
-                )
-                step = (
-                    st.land_speed * self.dt if miss <= st.land_reach or late or waited else 0.0
-                )
+                late = self._landing_late(t, side, human_support)
+                step = st.land_speed * self.dt if miss <= st.land_reach or late else 0.0
                 z = max(self.ground, z_prev - step)
                 target = pin.SE3(land.rotation.copy(), np.array([*land.translation[:2], z]))
                 feet[side] = target
@@ -932,21 +924,38 @@ class KinematicStepper:
         turn = pin.exp3(np.array([0.0, 0.0, math.copysign(limit, delta) - delta]))
         return pin.SE3(turn @ target.rotation, target.translation.copy())
 
+    def _landing_late(self, t: float, side: str, human_support: Mapping[str, bool]) -> bool:
+        """Whether a landing sole goes down where it is, short of its spot.
+
+        After ``land_timeout``, or after ``land_wait`` once the person has lifted the other foot.
+        """
+        since = t - self._since[side]
+        waited = not human_support.get(_OTHER[side], True) and since >= self.settings.land_wait
+        return since >= self.settings.land_timeout or waited
+
+    def _settle_ready(self, t: float, slack: float = 0.0) -> bool:
+        """Whether a settle step's wait is over at ``t`` (``settle_step``).
+
+        The person on both feet, and the robot on both soles in stance, for ``settle_time``
+        less ``slack``.
+        """
+        st = self.settings
+        if not st.settle_step or self._both_since is None:
+            return False
+        if t - self._both_since < st.settle_time - slack:
+            return False
+        return all(
+            self.states[s] == "stance" and t - self._since[s] >= st.settle_time - slack
+            for s in SIDES
+        )
+
     def settle_possible(self, t: float) -> bool:
         """Whether a settle step may come at ``t`` (``settle_step``).
 
-        The person has stood on both feet, and the robot on both soles, for ``settle_time`` up
-        to the last tick: the caller computes the offsets :meth:`update` needs only then.
+        :meth:`_settle_ready` up to the last tick, and a side has not made its settle step
+        yet: the caller computes the offsets :meth:`update` needs only then.
         """
-        st = self.settings
-        if not st.settle_step or self._both_since is None or len(self._settled) == len(SIDES):
-            return False
-        if t - self._both_since < st.settle_time - self.dt - 1e-12:
-            return False
-        return all(
-            self.states[s] == "stance" and t - self._since[s] >= st.settle_time - 1e-12
-            for s in SIDES
-        )
+        return len(self._settled) < len(SIDES) and self._settle_ready(t, self.dt + 1e-12)
 
     def _settle_side(
         self,
@@ -970,12 +979,7 @@ class KinematicStepper:
             return None
         if self._both_since is None:
             self._both_since = t
-        if not st.settle_step or not offset or t - self._both_since < st.settle_time:
-            return None
-        if any(
-            self.states[s] != "stance" or s in self._omega or t - self._since[s] < st.settle_time
-            for s in SIDES
-        ):
+        if not offset or not self._settle_ready(t) or any(s in self._omega for s in SIDES):
             return None
         side = max(SIDES, key=lambda s: offset.get(s, 0.0))
         if offset.get(side, 0.0) <= st.restep or side in self._settled:
