@@ -612,6 +612,7 @@ def initial_soles(
     leg_lengths: Mapping[str, float],
     kp: Mapping[str, np.ndarray],
     height_off: float,
+    width_range: tuple[float, float] = (1.0, 1.0),
 ) -> InitialStance | None:
     r"""The soles of the person's first-sample stance (the run's initial posture).
 
@@ -619,10 +620,14 @@ def initial_soles(
     leg-length ratio :math:`s` and turned by the calibration heading :math:`R_a`, and
     :math:`d_f` its part along the robot's reference heading: the soles keep their reference
     height, flatness, yaw, stance width and mid-point, and are placed :math:`\pm d_f / 2`
-    forward (within :data:`INITIAL_STRIDE` of the leg length). The stance width stays the
-    robot's (its hips are not the person's; a wider or narrower start stance twisted the legs
-    at the first kicks), and so do the yaws (the feet's yaws are followed as changes from
-    calibration).
+    forward (within :data:`INITIAL_STRIDE` of the leg length). Across, standing on both feet,
+    the stance width :math:`w_r` of the robot's reference becomes the person's,
+    :math:`\mathrm{clip}(d_l, \rho_{lo} w_r, \rho_{hi} w_r)` with :math:`d_l` the part of
+    :math:`d` across the reference heading and :math:`(\rho_{lo}, \rho_{hi})` =
+    ``width_range`` (``stepping.initial_width_min`` / ``_max``; ``(1, 1)`` keeps the robot's
+    width): each ankle's later target is its displacement since the first sample, so a start
+    width other than the person's stays in every spot once the body turns. The yaws stay the
+    robot's (the feet's yaws are followed as changes from calibration).
 
     A person standing on one foot (the lowest foot key-points, ankle, toe or heel, of the two
     feet differ by more than ``height_off``, the detector's lift height) starts on that foot,
@@ -656,11 +661,19 @@ def initial_soles(
     leg = min(leg_lengths.values()) if leg_lengths else 1.0
     reach = INITIAL_STRIDE * leg
     fwd = max(-reach, min(reach, float(fwd_axis @ d)))
+    lat_axis = np.array([-math.sin(psi), math.cos(psi), 0.0])
+    ref = feet.sole_ref
+    width = float(lat_axis @ (ref["left"].translation - ref["right"].translation))
+    both = abs(lows[0] - lows[1]) <= height_off
+    widen = 0.0  # how much wider than the robot's reference the stance starts [m]
+    if both and width > 0.0:
+        lo, hi = width_range
+        widen = min(max(float(lat_axis @ d), lo * width), hi * width) - width
     out = {}
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        ref = feet.sole_ref[side]
-        out[side] = pin.SE3(ref.rotation.copy(), ref.translation + sign * 0.5 * fwd * fwd_axis)
-    if abs(lows[0] - lows[1]) <= height_off:
+        shift = 0.5 * sign * (fwd * fwd_axis + widen * lat_axis)
+        out[side] = pin.SE3(ref[side].rotation.copy(), ref[side].translation + shift)
+    if both:
         return InitialStance(out, SIDES)
     # On one foot: the raised sole where the scaled person's is from the standing one (its
     # forward part within INITIAL_STRIDE; across, the person's offset, not narrower than the
@@ -668,9 +681,6 @@ def initial_soles(
     up = 0 if lows[0] > lows[1] else 1
     raised, standing = SIDES[up], SIDES[1 - up]
     sign = 1.0 if raised == "left" else -1.0  # d is left minus right: sign d = raised - standing
-    lat_axis = np.array([-math.sin(psi), math.cos(psi), 0.0])
-    ref = feet.sole_ref
-    width = float(lat_axis @ (ref["left"].translation - ref["right"].translation))
     raise_z = min(leg_scale * abs(lows[0] - lows[1]), INITIAL_RAISE * leg)
     lat = float(lat_axis @ d)  # the raised foot's offset towards its own side
     if raise_z <= CROSS_HEIGHT:

@@ -541,9 +541,11 @@ class Retargeter:
         ctrl, feet, cal = self.controller, self._fs, self._cal
         stream = self._require_stream()
         kp, rots, missing = stream.unpack(y)
+        st = self._sup.stepping
         stance = initial_soles(
-            feet, cal, self._leg_scale, self.leg_lengths, kp, self._sup.detection.height_off
-        )
+            feet, cal, self._leg_scale, self.leg_lengths, kp, self._sup.detection.height_off,
+            (st.initial_width_min, st.initial_width_max),
+        )  # fmt: skip
         if stance is None or self._rooting is None:
             return
         soles = stance.soles

@@ -169,6 +169,17 @@ class StepSettings:
             :func:`~qpretarget.retarget.feet.initial_soles`; on one foot, the other raised,
             when the person stands on one) instead of the robot's reference posture with the
             feet side by side.
+        initial_width_min: Narrowest start stance, a share of the robot's reference stance
+            width: the run starts at the scaled person's stance width (across the robot's
+            reference heading) within ``initial_width_min`` .. ``initial_width_max`` of the
+            robot's. The human-referenced ankle error compares each ankle's displacement since
+            the first sample, so a robot starting wider than the person stays off by the
+            difference once the body turns (the dance spin: 0.237 m against the scaled
+            person's 0.112 m, ankle error 0.117 -> 0.103 leg lengths with the person's width).
+        initial_width_max: Widest start stance, a share of the robot's reference stance width
+            (1.0: never wider; starting the front kicks and the karate kata at the person's
+            1.17-1.33 times the robot's width gave no better kata, 0.117-0.125 leg lengths, and
+            worse kicks, 0.095 -> 0.098-0.112, docs/retargeting.md *The start width*).
         absolute: Swing soles aim at the scaled person's foot positions in the world (each
             ankle's displacement since the first sample, scaled and turned by the calibration
             heading, added to the robot ankle's first position: the frame of the human-referenced
@@ -237,6 +248,8 @@ class StepSettings:
     pivot_double: bool = True
     pivot_yaw_double: float = math.radians(30.0)
     initial_stance: bool = True
+    initial_width_min: float = 0.7
+    initial_width_max: float = 1.0
     toe_off: bool = True
     toe_rise: float = 0.02
     toe_pitch: float = 0.6
@@ -278,6 +291,11 @@ class StepSettings:
                     f"{name} is a factor on the sole's weight in (0, 1], got "
                     f"{getattr(self, name)!r}"
                 )
+        if self.initial_width_min > self.initial_width_max:
+            raise ValueError(
+                "initial_width_min must not exceed initial_width_max, got "
+                f"{self.initial_width_min!r} > {self.initial_width_max!r}"
+            )
         if self.swing_reach > 1.0:
             raise ValueError(
                 f"swing_reach is a share of the leg length in (0, 1], got {self.swing_reach!r}"
