@@ -500,6 +500,8 @@ class Retargeter:
             blend_time=self.spec.blend_time, leg_extension=self.spec.leg_extension,
             kinematic=self.stepper is not None,
         )  # fmt: skip
+        if self.stepper is not None and self.support is not None:
+            self._rooting.flight_drift = self.support.stepping.flight_drift
         # Waist yaw at calibration (feet yaw fallback when the motion has no toes).
         first = unpacked[0]
         self._waist_yaw_cal = waist_yaw(first[0], first[1])
@@ -730,6 +732,15 @@ class Retargeter:
             # (its leg must reach it): on the front kicks the pelvis target moved on over the
             # person's landing foot, 56 cm from the robot's standing one.
             standing = {s: self._fs.ankle_of(s, soles[s]) for s in on if s not in anchors}
+            if self._rooting is None:
+                raise RetargetError("not calibrated yet")
+            # The standing feet where they are (not at a landing spot): the take-off drift.
+            planted = {
+                s: self._fs.ankle_of(s, state.frame_placement(self._fs.sole_ids[s])) for s in on
+            }
+            scaled = self._rooting.scale(t, human, root, anchors, standing)
+            self._rooting.plant(planted, human)
+            return scaled, anchors
         elif self.sequencer is not None:
             on = self.sequencer.contacts
             root = "double" if len(on) == 2 else on[0]
@@ -774,6 +785,8 @@ class Retargeter:
         if not stepper.started:
             stepper.reset(t, soles, human_foot, standing=self._initial_standing)
             ft.start(kp, soles, heading)
+            if self._rooting is not None:
+                self._rooting.align = ft.align
         heights = dict(self.detector.height)
         # Swing targets the legs cannot reach are raised in flight and for lift_time after it
         # (the landing spot is taken as the person's foot touches down): feet.REACH_RAISE.

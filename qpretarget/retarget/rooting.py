@@ -11,7 +11,9 @@ at; :class:`Rooting` scales the person from it (Poubel 2014 eq. 1,
 * in flight (kinematic mode) the waist moves horizontally from where it left the ground like the
   person's, times the leg-length ratio (the scaled person of the human-referenced metrics; the
   calibration's root scale outside the kinematic mode), and its height is the person's change
-  of height since calibration times the leg-length ratio (as in single support);
+  of height since calibration times the leg-length ratio (as in single support); where it left
+  the ground is corrected by the person's stance-foot travel the robot's pinned foot did not
+  follow (:meth:`Rooting.takeoff_drift`, ``stepping.flight_drift``);
 * in kinematic single support the pelvis height is the person's change of height since
   calibration times the leg-length ratio, from the robot's waist height at the start of the run
   (:attr:`Rooting.waist_height`; the chain from the support foot places it horizontally);
@@ -78,6 +80,16 @@ class Rooting:
         #: posture's, or the initial stance's (``stepping.initial_stance``, set by the
         #: retargeter: a staggered stance holds the pelvis lower).
         self.waist_height = float(calibration.robot_waist[2])
+        #: Largest horizontal correction of the waist at a take-off [m]
+        #: (``stepping.flight_drift``, set by the retargeter; 0: none).
+        self.flight_drift = 0.0
+        #: Heading alignment of the person's displacements (the human-referenced metrics',
+        #: set by the retargeter; the calibration's heading until then).
+        self.align: np.ndarray | None = None
+        #: side -> (robot ankle, person's ankle) where each standing robot foot's stance began.
+        self.planted: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        #: side -> ankle of each standing robot foot at the last tick.
+        self.standing_now: dict[str, np.ndarray] = {}
 
     def scale(
         self,
@@ -94,7 +106,8 @@ class Rooting:
         ``leg_extension`` too (:func:`~qpretarget.motion.scaling.limit_leg_extension`).
         """
         if root == "flight" and self.root != "flight" and self.last_waist is not None:
-            self.flight_root = self.last_waist
+            w_r, w_h = self.last_waist
+            self.flight_root = (w_r + self.takeoff_drift(human), w_h)
         scaled = self.scale_from(human, root, anchors)
         if self.root is not None and root != self.root and self.blend_time > 0:
             old = self.scale_from(human, self.root, self.last_anchors)
@@ -117,6 +130,61 @@ class Rooting:
             )
         self.last_waist = (scaled["waist"].copy(), np.asarray(human["waist"], float).copy())
         return scaled
+
+    def plant(
+        self, robot_ankles: Mapping[str, np.ndarray], human: Mapping[str, np.ndarray]
+    ) -> None:
+        """Record this tick's standing robot feet (their ankles), after :meth:`scale`.
+
+        A foot standing since an earlier tick keeps the pair (robot ankle, person's ankle) of
+        its stance's first tick; a foot no longer standing is forgotten.
+        """
+        planted: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        for side, r in robot_ankles.items():
+            old = self.planted.get(side)
+            h = human.get(f"{side}_ankle")
+            if old is not None:
+                planted[side] = old
+            elif h is not None and np.all(np.isfinite(h)) and np.all(np.isfinite(r)):
+                planted[side] = (np.array(r, float), np.array(h, float))
+        self.planted = planted
+        self.standing_now = {s: np.array(r, float) for s, r in robot_ankles.items()}
+
+    def takeoff_drift(self, human: Mapping[str, np.ndarray]) -> np.ndarray:
+        r"""Horizontal correction of the waist where the robot leaves the ground [m].
+
+        Poubel eq. 1 roots the body at the robot's stance ankle :math:`r` with the person's
+        ankle now, :math:`a(t)`. A person's stance foot that swivels on its ball or slides
+        moves :math:`a(t)` away from where it touched down, :math:`a_0`, while the robot's
+        foot stays pinned where it landed, :math:`r_0`: the waist target then carries that
+        travel relative to the robot's foot, and the flight, which moves the waist like the
+        person's from where it left the ground, kept it to the landing (on the dance spin the
+        pelvis flew 12-13 cm ahead of the scaled person's). With :math:`s` the leg-length
+        ratio and :math:`R_a` the heading alignment (:attr:`align`), the correction is the
+        mean over the feet standing at the last tick of
+
+        .. math:: c = s R_a (a(t) - a_0) - (r - r_0),
+
+        horizontal, at most :attr:`flight_drift` long; the root change's blend
+        (``scaling.blend_time``) takes the waist there smoothly. Zero without standing feet,
+        without their person's ankles, or with ``flight_drift`` 0.
+        """
+        R = self.calibration.rotation if self.align is None else self.align
+        drifts = []
+        for side, (r0, h0) in self.planted.items():
+            h, r = human.get(f"{side}_ankle"), self.standing_now.get(side)
+            if h is None or r is None or not np.all(np.isfinite(h)):
+                continue
+            c = self.leg_scale * (R @ (np.asarray(h, float) - h0)) - (r - r0)
+            c[2] = 0.0
+            drifts.append(c)
+        if not drifts or self.flight_drift <= 0.0:
+            return np.zeros(3)
+        c = np.mean(drifts, axis=0)
+        n = float(np.linalg.norm(c))
+        if n > self.flight_drift:
+            c *= self.flight_drift / n
+        return c if np.all(np.isfinite(c)) else np.zeros(3)
 
     def scale_from(
         self, human: Mapping[str, np.ndarray], root: str, anchors: Mapping[str, np.ndarray]

@@ -180,6 +180,12 @@ class StepSettings:
             (1.0: never wider; starting the front kicks and the karate kata at the person's
             1.17-1.33 times the robot's width gave no better kata, 0.117-0.125 leg lengths, and
             worse kicks, 0.095 -> 0.098-0.112, docs/retargeting.md *The start width*).
+        flight_drift: Largest horizontal correction of the waist at a take-off [m]: the
+            person's stance-foot travel (a swivel on the ball of the foot, a slide) that the
+            robot's pinned foot did not follow, scaled by the leg-length ratio
+            (:meth:`~qpretarget.retarget.rooting.Rooting.takeoff_drift`; on the dance spin
+            the flights kept the pelvis 12-13 cm ahead of the scaled person's, ankle error
+            0.103 -> 0.095 leg lengths; the same at 0.08 and 0.25 m).
         absolute: Swing soles aim at the scaled person's foot positions in the world (each
             ankle's displacement since the first sample, scaled and turned by the calibration
             heading, added to the robot ankle's first position: the frame of the human-referenced
@@ -250,6 +256,7 @@ class StepSettings:
     initial_stance: bool = True
     initial_width_min: float = 0.7
     initial_width_max: float = 1.0
+    flight_drift: float = 0.15
     toe_off: bool = True
     toe_rise: float = 0.02
     toe_pitch: float = 0.6
