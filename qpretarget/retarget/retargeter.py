@@ -711,6 +711,7 @@ class Retargeter:
         """Scaled key-points and the supporting ankles they are rooted at."""
         cal, state = self._cal, self.controller.state
         standing: dict[str, np.ndarray] = {}
+        planted: dict[str, np.ndarray] | None = None
         if self.stepper is not None:
             # Rooted at the robot's standing feet the person stands on too (Poubel 2014 eq. 1
             # from the support foot; never the mid-ankle point while a leg is in the air), else
@@ -727,20 +728,15 @@ class Retargeter:
                     soles[s] = spot
             use = [s for s in soles if support.get(s, True)] or list(on)
             root = "flight" if not use else "double" if len(use) == 2 else use[0]
-            anchors = {s: self._fs.ankle_of(s, soles[s]) for s in use}
+            ankles = {s: self._fs.ankle_of(s, sole) for s, sole in soles.items()}
+            anchors = {s: ankles[s] for s in use}
             # A robot foot still standing on a foot the person lifted bounds the pelvis too
             # (its leg must reach it): on the front kicks the pelvis target moved on over the
             # person's landing foot, 56 cm from the robot's standing one.
-            standing = {s: self._fs.ankle_of(s, soles[s]) for s in on if s not in anchors}
-            if self._rooting is None:
-                raise RetargetError("not calibrated yet")
-            # The standing feet where they are (not at a landing spot): the take-off drift.
-            planted = {
-                s: self._fs.ankle_of(s, state.frame_placement(self._fs.sole_ids[s])) for s in on
-            }
-            scaled = self._rooting.scale(t, human, root, anchors, standing)
-            self._rooting.plant(planted, human)
-            return scaled, anchors
+            standing = {s: ankles[s] for s in on if s not in anchors}
+            # The standing feet where they are (a landing foot is not among them): the
+            # take-off drift (Rooting.takeoff_drift).
+            planted = {s: ankles[s] for s in on}
         elif self.sequencer is not None:
             on = self.sequencer.contacts
             root = "double" if len(on) == 2 else on[0]
@@ -753,7 +749,10 @@ class Retargeter:
                        if f"{s}_ankle" in cal.robot_points}  # fmt: skip
         if self._rooting is None:
             raise RetargetError("not calibrated yet")
-        return self._rooting.scale(t, human, root, anchors, standing), anchors
+        scaled = self._rooting.scale(t, human, root, anchors, standing)
+        if planted is not None:
+            self._rooting.plant(planted, human)
+        return scaled, anchors
 
     def _step(
         self,

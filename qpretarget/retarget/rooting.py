@@ -169,6 +169,8 @@ class Rooting:
         (``scaling.blend_time``) takes the waist there smoothly. Zero without standing feet,
         without their person's ankles, or with ``flight_drift`` 0.
         """
+        if self.flight_drift <= 0.0:
+            return np.zeros(3)
         R = self.calibration.rotation if self.align is None else self.align
         drifts = []
         for side, (r0, h0) in self.planted.items():
@@ -178,7 +180,7 @@ class Rooting:
             c = self.leg_scale * (R @ (np.asarray(h, float) - h0)) - (r - r0)
             c[2] = 0.0
             drifts.append(c)
-        if not drifts or self.flight_drift <= 0.0:
+        if not drifts:
             return np.zeros(3)
         c = np.mean(drifts, axis=0)
         n = float(np.linalg.norm(c))
