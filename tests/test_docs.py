@@ -310,6 +310,7 @@ CHANGES: dict[tuple[str, str, str], tuple[dict[str, Any], Any]] = {
         {"entry": {"pairs": "auto"}}, [["torso_link", "left_shoulder_roll_link"],
                                        ["left_wrist_roll_link", "left_wrist_yaw_link"]]),
     ("constraints", "self_collision", "rest_fraction"): ({"entry": AUTO_PAIRS}, 1.0),
+    ("constraints", "self_collision", "safety"): ({}, [[*p, 0.01] for p in COLLISION_PAIRS]),
     ("constraints", "self_collision", "trust_gap_fraction"): ({"entry": AUTO_PAIRS}, 0.0),
     ("constraints", "self_collision", "touch_distance"): (
         {"entry": {**AUTO_PAIRS, "d_s": 0.02, "d_i": 0.1}}, 0.1),

@@ -590,6 +590,32 @@ def _check_pair_spec(pairs: Any, links: Any, include: Any) -> None:
         raise ConfigError("`include` adds pairs to pairs: auto; list them in `pairs` instead.")
 
 
+def _check_safety_spec(safety: Any, d_i: float) -> list[tuple[str, str, float]]:
+    """``safety:`` as ``[(link_a, link_b, d)]``, each ``d`` in (0, ``d_i``) [m]."""
+    if safety is None:
+        return []
+    form = "safety must be a list of [link_a, link_b, distance in m]"
+    if isinstance(safety, (str, bytes)) or not isinstance(safety, Sequence):
+        raise ConfigError(f"{form}, got {safety!r}.")
+    out: list[tuple[str, str, float]] = []
+    for k, entry in enumerate(safety):
+        if (
+            isinstance(entry, (str, bytes))
+            or not isinstance(entry, Sequence)
+            or len(entry) != 3
+            or not all(isinstance(x, str) for x in entry[:2])
+        ):
+            raise ConfigError(f"{form}; entry {k} is {entry!r}.", path=f"safety[{k}]")
+        d = entry[2]
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not 0 < d < d_i:
+            raise ConfigError(
+                f"safety[{k}]: the distance must be a number in (0, d_i = {d_i}) m, got {d!r}.",
+                path=f"safety[{k}]",
+            )
+        out.append((str(entry[0]), str(entry[1]), float(d)))
+    return out
+
+
 @CONSTRAINTS.register("self_collision")
 class SelfCollision(DistanceDamper):
     r"""Keep link pairs at least :math:`d_s` apart (velocity damper, module docstring).
@@ -616,6 +642,11 @@ class SelfCollision(DistanceDamper):
             :math:`\min(d_s, \rho\, d_{rest})`, :math:`d_{rest}` its distance in the reference
             posture: pairs that sit close by construction (a shoulder beside the torso, a hip
             motor beside the pelvis) are kept apart without locking the joint between them.
+        safety: ``[[link_a, link_b, d], ...]``: the safety distance of these pairs [m], in place
+            of ``d_s`` and the ``rest_fraction`` rule: parts that nest by design (G1's hip-roll
+            motor folds into the pelvis shell as the hip flexes, 0.4 mm apart at 2 rad: its
+            rest rule, 6 mm, stopped the hip at 1.15 rad and a squat at the start). Each pair
+            must be one of the constraint's pairs; ``d`` in (0, ``d_i``).
         use_srdf: ``auto`` only: leave out the pairs the robot's SRDF disables.
         max_rows: number of QP rows; the closest active pairs get them. Default: one row per
             pair for a listed pair set, :data:`AUTO_MAX_ROWS` for ``auto`` (hundreds of pairs).
@@ -655,6 +686,7 @@ class SelfCollision(DistanceDamper):
         include: Sequence[Sequence[str]] | None = None,
         touch_distance: float = 0.005,
         rest_fraction: float = 0.25,
+        safety: Sequence[Sequence[Any]] | None = None,
         use_srdf: bool = True,
         max_rows: int | None = None,
         broad_phase: bool = True,
@@ -689,6 +721,7 @@ class SelfCollision(DistanceDamper):
         self.rest_fraction = positive_float(rest_fraction, "rest_fraction")
         if self.rest_fraction > 1:
             raise ConfigError(f"rest_fraction must be in (0, 1], got {rest_fraction}.")
+        self._safety_spec = _check_safety_spec(safety, self.d_i)
         self.use_srdf = bool(use_srdf)
         #: Pair distances in the reference posture [m] (set by bind; reported by describe()).
         self.reference_distances: np.ndarray | None = None
@@ -737,6 +770,7 @@ class SelfCollision(DistanceDamper):
         # Distances in the reference posture (reported by describe()).
         self.reference_distances = self.model.compute_all(RobotState(robot))[0]
         self.safety = self._safety_distances(pairs, self.reference_distances)
+        self._set_pair_safety(robot, shapes, pairs, p)
         self._setup_rows(robot)
 
     def _listed_pairs(
@@ -794,6 +828,23 @@ class SelfCollision(DistanceDamper):
                     f"distance: {examples}{more}"
                 )
         return safety
+
+    def _set_pair_safety(
+        self, robot: RobotModel, shapes: dict[str, LinkShape], pairs: list[Pair], p: str
+    ) -> None:
+        """The ``safety:`` entries: their pairs' safety distances, in place of the rules'."""
+        index = {frozenset(pr): k for k, pr in enumerate(pairs)}
+        for k, (a, b, d) in enumerate(self._safety_spec):
+            la, lb = (resolve_link(robot, shapes, x, f"{p}safety[{k}]") for x in (a, b))
+            i = index.get(frozenset((la, lb)))
+            if i is None:
+                raise ConfigError(
+                    f"safety[{k}] names the pair {la}/{lb}, which the constraint does not keep "
+                    "(left out or not listed): add it to `include` (pairs: auto) or to `pairs`, "
+                    "or drop the entry; `qpretarget info CONFIG --pairs` lists the kept pairs.",
+                    path=f"{p}safety[{k}]",
+                )
+            self.safety[i] = d
 
     def _disable(self, robot: RobotModel, why: str) -> None:
         """``optional: true`` on a robot without collision geometry: no pairs, no rows."""

@@ -216,13 +216,16 @@ class Fallback:
         lb, ub = tp.lb, tp.ub
         tol_lo = 1e-9 * (1.0 + np.abs(np.where(np.isfinite(lb), lb, 0.0)))
         tol_hi = 1e-9 * (1.0 + np.abs(np.where(np.isfinite(ub), ub, 0.0)))
+        bounds: list[tuple[np.ndarray, np.ndarray] | None] = []
         for con in self._bound_cons:  # most important first
             b = con.compute_bounds(tp.state, tp.dt)
             if b is None:
+                bounds.append(None)
                 own_lo.append(np.zeros(nv, dtype=bool))
                 own_hi.append(np.zeros(nv, dtype=bool))
                 continue
-            clo, chi = b
+            clo, chi = np.array(b[0], dtype=float), np.array(b[1], dtype=float)
+            bounds.append((clo, chi))
             if con.name in self.hard:
                 with np.errstate(invalid="ignore"):  # inf - inf where both sides are unbounded
                     room_lo = np.maximum(lb - clo, 0.0)
@@ -240,7 +243,50 @@ class Fallback:
             free_hi &= ~mhi
             own_lo.append(mlo)
             own_hi.append(mhi)
+        self._own_unowned(lb, ub, free_lo, free_hi, bounds, w_lo, w_hi, own_lo, own_hi)
         return w_lo, w_hi, own_lo, own_hi
+
+    def _own_unowned(
+        self,
+        lb: np.ndarray,
+        ub: np.ndarray,
+        free_lo: np.ndarray,
+        free_hi: np.ndarray,
+        bounds: list[tuple[np.ndarray, np.ndarray] | None],
+        w_lo: np.ndarray,
+        w_hi: np.ndarray,
+        own_lo: list[np.ndarray],
+        own_hi: list[np.ndarray],
+    ) -> None:
+        """Give a merged side that no constraint's bound reaches now to the tightest one.
+
+        A bound can tighten between the merge and this call (a self-collision trust region
+        that shrinks as it is recomputed): the merged side then matches no constraint, and
+        widening it went unreported while it passed the acceleration limit (1.87 rad/s over on
+        an ``ok`` tick of the kata). Widening such a side violates the constraint with the
+        tightest bound there first: it owns the side, its weight prices the slack and the
+        amount is reported under its name.
+        """
+        for free, side, sign, own, w in (
+            (free_lo, lb, 1.0, own_lo, w_lo),
+            (free_hi, ub, -1.0, own_hi, w_hi),
+        ):
+            cols = np.flatnonzero(free & np.isfinite(side))
+            if cols.size == 0:
+                continue
+            best = np.full(cols.size, -1)
+            tight = np.full(cols.size, -np.inf)
+            for k, b in enumerate(bounds):
+                if b is None:
+                    continue
+                c = sign * (b[0] if sign > 0 else b[1])[cols]
+                better = np.isfinite(c) & (c > tight)
+                best[better] = k
+                tight[better] = c[better]
+            for k in np.unique(best[best >= 0]):
+                sel = cols[best == k]
+                own[k][sel] = True
+                w[sel] = self.weight_of[self._bound_cons[k].name]
 
     def _phase1(
         self,

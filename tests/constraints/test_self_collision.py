@@ -286,3 +286,65 @@ def test_auto_slots_repeat_and_reset(g1):
     assert con._slots(np.array([7, 9, 12])).tolist() == [1, 2, 0]  # unchanged set: same rows
     con.reset(RobotState(g1))
     assert con._slots(np.array([7, 9, 12])).tolist() == [0, 1, 2]  # as in a fresh run
+
+
+HIP_PAIRS = [
+    ["left_hip_roll_link", "pelvis_contour_link"],
+    ["right_hip_roll_link", "pelvis_contour_link"],
+]
+
+
+def test_pair_safety_frees_a_hip_that_nests_into_the_pelvis(g1):
+    """``safety:`` sets a pair's safety distance in place of the rest rule (min(d_s, 0.25 rest)).
+
+    G1's hip-roll motor folds into the pelvis shell as the hip flexes: 24 mm apart at the
+    reference, 0.4 mm at 2 rad. The rest rule keeps it 6 mm away, which holds the hip at about
+    1.15 rad; with 2 mm it may flex on. The bounds are compared exactly (1e-12: the same
+    arithmetic) and the pair's distance is the constraint's own.
+    """
+    rest = SelfCollision(pairs="auto", include=HIP_PAIRS)
+    rest.bind(g1)
+    over = SelfCollision(pairs="auto", include=HIP_PAIRS, safety=[[*HIP_PAIRS[0], 0.002]])
+    over.bind(g1)
+    assert over.pairs == rest.pairs
+    k = {frozenset(p): i for i, p in enumerate(over.pairs)}
+    left, right = (k[frozenset(p)] for p in HIP_PAIRS)
+    assert over.safety[left] == 0.002 and rest.safety[left] > 0.005  # 0.25 x 24 mm
+    assert over.safety[right] == rest.safety[right]  # the other hip keeps the rest rule
+    others = np.ones(len(over.pairs), bool)
+    others[left] = False
+    np.testing.assert_array_equal(over.safety[others], rest.safety[others])
+    assert any(f"safety {2.0:.1f} mm" in line for line in over.describe(full=True))
+    # The left hip flexed to 1.4 rad: the pair is between the two safety distances.
+    q = g1.q_reference.copy()
+    q[g1.joint_q_index[g1.joint_index("left_hip_pitch_joint")]] = -1.4
+    q[g1.joint_q_index[g1.joint_index("left_hip_roll_joint")]] = 0.0
+    state = RobotState(g1)
+    state.update(q)
+    name = f"{HIP_PAIRS[0][0]}/{HIP_PAIRS[0][1]}"
+    for con in (rest, over):
+        con.compute_rows(state, 0.01)
+    d = over.model.distances[left]
+    assert 0.002 < d < rest.safety[left]
+    # With the rest rule the pair is inside its safety distance (pushed apart, reported); with
+    # 2 mm it may still approach by half its gap per tick.
+    assert rest.violations[name] == pytest.approx(rest.safety[left] - d, abs=1e-12)
+    assert name not in over.violations
+
+
+def test_pair_safety_is_validated(g1):
+    with pytest.raises(ConfigError, match=r"list of \[link_a, link_b, distance"):
+        SelfCollision(pairs="auto", safety=[["left_hip_roll_link", "pelvis_contour_link"]])
+    with pytest.raises(ConfigError, match=r"in \(0, d_i = 0.08\)"):
+        SelfCollision(pairs="auto", safety=[[*HIP_PAIRS[0], 0.0]])
+    with pytest.raises(ConfigError, match=r"in \(0, d_i = 0.08\)"):
+        SelfCollision(pairs="auto", safety=[[*HIP_PAIRS[0], 0.1]])
+    with pytest.raises(ConfigError, match="list of"):
+        SelfCollision(pairs="auto", safety="left_hip_roll_link")
+    con = SelfCollision(pairs="auto", safety=[["left_hip_rol_link", "pelvis_contour_link", 0.002]])
+    with pytest.raises(UnknownNameError, match="left_hip_roll_link"):
+        con.bind(g1)
+    # Without `include` the hip pair is left out (chain neighbours close at rest).
+    con = SelfCollision(pairs="auto", safety=[[*HIP_PAIRS[0], 0.002]])
+    with pytest.raises(ConfigError, match="does not keep.*add it to `include`"):
+        con.bind(g1)
