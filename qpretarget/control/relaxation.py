@@ -260,11 +260,12 @@ class Fallback:
     ) -> None:
         """Give a merged side that no constraint's bound reaches now to the tightest one.
 
-        A bound can tighten between the merge and this call (a self-collision trust region
-        that shrinks as it is recomputed): the merged side then matches no constraint, and
-        widening it went unreported while it passed the acceleration limit (1.87 rad/s over on
-        an ``ok`` tick of the kata). Widening such a side violates the constraint with the
-        tightest bound there first: it owns the side, its weight prices the slack and the
+        The merged box can have a side that none of the bound constraints' bounds, recomputed
+        here, reaches (seen on the kata: a merged -9.20 rad/s where the tightest recomputed
+        bound, the acceleration limit's, was -9.57): that side had no owner, its slack cost
+        the least and widening it was not reported, while it passed the acceleration limit
+        (1.87 rad/s over on an ``ok`` tick). Widening such a side violates the constraint with
+        the tightest bound there first: it owns the side, its weight prices the slack and the
         amount is reported under its name.
         """
         for free, side, sign, own, w in (
