@@ -249,3 +249,33 @@ def test_braking_bound_is_viable() -> None:
         nxt = con._nu_max(delta - nu)  # distance left after the tick
         assert np.all(nu - 1 <= nxt + 1e-9), gamma
         assert np.all(nu <= gamma * delta + 1e-9)  # and the joint_limits bound holds
+
+
+def test_a_box_side_no_constraint_reaches_is_owned_by_the_tightest(g1) -> None:
+    """A merged box side that no bound constraint's recomputed bound reaches (an ``ok`` tick
+    of the kata went 1.87 rad/s past the acceleration limit: its widening had no owner and was
+    not reported) belongs to the constraint with the tightest bound there, at its weight.
+    Synthetic bounds; exact comparisons (booleans and copied weights)."""
+    ctrl = Controller(whole_body_config(g1))  # joint, velocity and acceleration limits
+    fb = ctrl.fallback
+    names = [c.name for c in fb._bound_cons]
+    k_acc, k_vel = names.index("acceleration_limits"), names.index("velocity_limits")
+    nv = fb.nv
+    lb, ub = np.full(nv, -1.0), np.full(nv, 1.0)
+    bounds: list = [None] * len(names)
+    bounds[k_vel] = (np.full(nv, -30.0), np.full(nv, 30.0))
+    bounds[k_acc] = (np.full(nv, -2.0), np.full(nv, 1.5))
+    bounds[k_acc][0][3] = -np.inf  # no acceleration bound on entry 3's lower side
+    free_lo, free_hi = np.ones(nv, bool), np.zeros(nv, bool)
+    free_hi[5] = True
+    w_lo, w_hi = np.ones(nv), np.ones(nv)
+    own_lo = [np.zeros(nv, bool) for _ in names]
+    own_hi = [np.zeros(nv, bool) for _ in names]
+    fb._own_unowned(lb, ub, free_lo, free_hi, bounds, w_lo, w_hi, own_lo, own_hi)
+    expect_acc = np.ones(nv, bool)
+    expect_acc[3] = False
+    np.testing.assert_array_equal(own_lo[k_acc], expect_acc)
+    np.testing.assert_array_equal(own_lo[k_vel], ~expect_acc)  # the next tightest
+    assert own_hi[k_acc][5] and own_hi[k_acc].sum() == 1 and not own_hi[k_vel].any()
+    assert w_lo[0] == fb.weight_of["acceleration_limits"] != 1.0
+    assert w_lo[3] == fb.weight_of["velocity_limits"] and w_hi[5] == w_lo[0]
