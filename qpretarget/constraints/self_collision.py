@@ -769,8 +769,8 @@ class SelfCollision(DistanceDamper):
         )  # fmt: skip
         # Distances in the reference posture (reported by describe()).
         self.reference_distances = self.model.compute_all(RobotState(robot))[0]
-        self.safety = self._safety_distances(pairs, self.reference_distances)
-        self._set_pair_safety(robot, shapes, pairs, p)
+        given = self._given_safety(robot, shapes, pairs, p)
+        self.safety = self._safety_distances(pairs, self.reference_distances, given)
         self._setup_rows(robot)
 
     def _listed_pairs(
@@ -800,12 +800,19 @@ class SelfCollision(DistanceDamper):
             pairs.append((a, b))
         return pairs
 
-    def _safety_distances(self, pairs: list[tuple[str, str]], ref: np.ndarray) -> np.ndarray:
-        r"""Per pair safety distance: ``d_s``, or :math:`\min(d_s, f\,d_{rest})` for auto pairs."""
+    def _safety_distances(
+        self, pairs: list[tuple[str, str]], ref: np.ndarray, given: dict[int, float]
+    ) -> np.ndarray:
+        r"""Per pair safety distance: ``d_s``, or :math:`\min(d_s, f\,d_{rest})` for auto pairs.
+
+        ``given`` (pair index -> distance, the ``safety:`` entries) replaces either rule.
+        """
         safety = np.full(len(pairs), self.d_s)
+        ruled = np.ones(len(pairs), dtype=bool)
+        ruled[list(given)] = False
         if self._pairs_spec != "auto":
-            for (a, b), d in zip(pairs, ref, strict=True):
-                if d < self.d_s:
+            for (a, b), d, r in zip(pairs, ref, ruled, strict=True):
+                if r and d < self.d_s:
                     self.notes.append(
                         f"pair {a}/{b} is {d * 1000:.1f} mm apart in the reference posture "
                         f"(< d_s = {self.d_s * 1000:.0f} mm): it is pushed apart from the start"
@@ -815,7 +822,7 @@ class SelfCollision(DistanceDamper):
             # lock the joint between them at d_s: their safety distance is a fraction of their
             # rest distance, min(d_s, rest_fraction * rest) (> 0: the hulls, hence the meshes,
             # stay apart).
-            close = np.flatnonzero(self.rest_fraction * ref < self.d_s)
+            close = np.flatnonzero((self.rest_fraction * ref < self.d_s) & ruled)
             if close.size:
                 safety[close] = self.rest_fraction * ref[close]
                 examples = ", ".join(
@@ -827,13 +834,16 @@ class SelfCollision(DistanceDamper):
                     f"posture: their safety distance is {self.rest_fraction:g} x their rest "
                     f"distance: {examples}{more}"
                 )
+        for i, d in given.items():
+            safety[i] = d
         return safety
 
-    def _set_pair_safety(
+    def _given_safety(
         self, robot: RobotModel, shapes: dict[str, LinkShape], pairs: list[Pair], p: str
-    ) -> None:
-        """The ``safety:`` entries: their pairs' safety distances, in place of the rules'."""
+    ) -> dict[int, float]:
+        """The ``safety:`` entries as pair index -> safety distance [m]."""
         index = {frozenset(pr): k for k, pr in enumerate(pairs)}
+        given: dict[int, float] = {}
         for k, (a, b, d) in enumerate(self._safety_spec):
             la, lb = (resolve_link(robot, shapes, x, f"{p}safety[{k}]") for x in (a, b))
             i = index.get(frozenset((la, lb)))
@@ -844,7 +854,8 @@ class SelfCollision(DistanceDamper):
                     "or drop the entry; `qpretarget info CONFIG --pairs` lists the kept pairs.",
                     path=f"{p}safety[{k}]",
                 )
-            self.safety[i] = d
+            given[i] = d
+        return given
 
     def _disable(self, robot: RobotModel, why: str) -> None:
         """``optional: true`` on a robot without collision geometry: no pairs, no rows."""

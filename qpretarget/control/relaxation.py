@@ -224,7 +224,7 @@ class Fallback:
                 own_lo.append(np.zeros(nv, dtype=bool))
                 own_hi.append(np.zeros(nv, dtype=bool))
                 continue
-            clo, chi = np.array(b[0], dtype=float), np.array(b[1], dtype=float)
+            clo, chi = b  # each constraint's own buffers: valid through this call
             bounds.append((clo, chi))
             if con.name in self.hard:
                 with np.errstate(invalid="ignore"):  # inf - inf where both sides are unbounded
