@@ -16,6 +16,10 @@ over the first 10 samples) and aligned at the first sample on the root position 
 
 with :math:`w_h` the person's waist key-point, :math:`w_r` the robot's pelvis frame and
 :math:`\psi` the headings (robot: the pelvis frame's x axis; person: the normal of the hip line).
+A person in the air at the first sample (a clip cut mid-jump: the lowest foot key-point then
+more than :data:`~qpretarget.motion.phases.AIR_START`, 10 cm, over its lowest in the run, by
+:math:`\delta`) is aligned at the floor instead: :math:`s \delta` is added to the heights
+(``start_in_air_m``), so a robot standing where the person lands counts as level with them.
 
 **Observed span.** Everything is measured over the span from the first to the last sample at
 which the person's waist and hips are :func:`observed` (marker data starting or ending with
@@ -76,6 +80,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..motion.calibration import hip_heading
+from ..motion.phases import AIR_START
 from ..robot import RobotModel, load_robot
 from ..trajectory import RobotTrajectory
 
@@ -213,6 +218,21 @@ class _RobotSeries:
             for s, v in feet.items()
             if len(v) == 1 and v[0] in traj.foot_names
         }
+
+
+def _air_start(kp: Mapping[str, np.ndarray]) -> float:
+    """The person's height in the air at the first sample [m, unscaled], else 0.
+
+    How far the lowest foot point at the first sample is over the lowest over the run, when
+    more than :data:`~qpretarget.motion.phases.AIR_START` (the person in the air there).
+    """
+    feet = [kp[f"{x}_{p}"] for x in SIDES for p in ("ankle", "toe", "heel") if f"{x}_{p}" in kp]
+    if not feet:
+        return 0.0
+    z = np.stack([f[:, 2] for f in feet], axis=1)
+    first, lowest = float(np.nanmin(z[0])), float(np.nanmin(z))
+    drop = first - lowest
+    return drop if math.isfinite(drop) and drop > AIR_START else 0.0
 
 
 def _path(xy: np.ndarray, t: np.ndarray) -> float:
@@ -387,11 +407,15 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
         ]
     )
     w0 = kp["waist"][0]
+    # Vertically at the floor for a person in the air at the first sample (AIR_START).
+    lift0 = s * _air_start(kp)
+    up = np.array([0.0, 0.0, lift0])
+    out_air = {"start_in_air_m": lift0} if lift0 > 0.0 else {}
 
     def scaled(p: np.ndarray) -> np.ndarray:
-        return (s * (p - w0)) @ Rz.T + rs.pelvis[0]
+        return (s * (p - w0)) @ Rz.T + rs.pelvis[0] + up
 
-    out: dict[str, Any] = {"leg_length_ratio": s, "robot_leg_length_m": L_r}
+    out: dict[str, Any] = {"leg_length_ratio": s, "robot_leg_length_m": L_r, **out_air}
     if span is not None:
         out["observed_span_s"] = span
     waist = scaled(kp["waist"])
@@ -454,7 +478,7 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
     for x in SIDES:
         a = f"{x}_ankle"
         if a in kp and x in rs.ankle:
-            d_h = (s * (kp[a] - kp[a][0])) @ Rz.T
+            d_h = (s * (kp[a] - kp[a][0])) @ Rz.T + up
             d_r = rs.ankle[x] - rs.ankle[x][0]
             errs.append(np.linalg.norm(d_r - d_h, axis=1) / L_r)
             final[x] = float(np.linalg.norm((d_r - d_h)[-1, :2]))

@@ -204,10 +204,13 @@ def run(args: argparse.Namespace) -> int:
         _write_record(session, record)
     if run_file is not None:
         _write_run(session, retargeter, run_file)
+    report["notes"] = list(retargeter.notes)  # a person lying, a start in the air, no feet
     if args.json:
         print(json.dumps(report))
     else:
         print(format_report(report))
+        for note in report["notes"]:
+            print(f"note: {note}")
     _ = viewer
     return 0
 

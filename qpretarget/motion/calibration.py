@@ -490,6 +490,34 @@ def _heading_from_points(points: Mapping[str, np.ndarray]) -> float:
     return math.nan
 
 
+#: Largest tilt of the person's body axis from the vertical at calibration for a standing
+#: person [deg] (:func:`body_tilt`): a deep squat or a bow keeps the waist within about 45 deg
+#: of straight over the ankles; lying down is about 90, upside down 180.
+UPRIGHT_TILT = 60.0
+
+
+def body_tilt(points: Mapping[str, npt.ArrayLike]) -> float | None:
+    r"""Tilt of the person's body axis from the vertical [deg]: lying down about 90.
+
+    The axis runs from the mid-ankle point :math:`a = (a_l + a_r)/2` to the waist :math:`w`:
+    :math:`\theta = \arccos\big((w - a)_z / \lVert w - a \rVert\big)`, the median over the
+    samples given (``(3,)`` or ``(N, 3)`` arrays of ``waist``, ``left_ankle`` and
+    ``right_ankle``; samples with a missing point are left out). ``None`` without those
+    key-points or a usable sample.
+    """
+    need = ("waist", "left_ankle", "right_ankle")
+    if not all(k in points for k in need):
+        return None
+    w, al, ar = (np.asarray(points[k], float).reshape(-1, 3) for k in need)
+    d = w - 0.5 * (al + ar)
+    n = np.linalg.norm(d, axis=1)
+    ok = np.isfinite(n) & (n > 1e-6)
+    if not ok.any():
+        return None
+    c = np.clip(d[ok, 2] / n[ok], -1.0, 1.0)
+    return float(np.degrees(np.median(np.arccos(c))))
+
+
 def wrap_angle(angle: float) -> float:
     """Angle wrapped to (-pi, pi] [rad]."""
     return float(math.atan2(math.sin(angle), math.cos(angle)))
@@ -498,8 +526,10 @@ def wrap_angle(angle: float) -> float:
 __all__ = [
     "FEET",
     "KEYPOINT_TREE",
+    "UPRIGHT_TILT",
     "Calibration",
     "CalibrationError",
+    "body_tilt",
     "build_tree",
     "calibrate",
     "nearest_rotation",

@@ -51,6 +51,12 @@ import pinocchio as pin
 
 from ..geometry2d import convex_hull_2d as convex_hull  # noqa: F401
 
+#: A person whose feet come this much lower than their lowest point at the first sample was in
+#: the air there [m] (a clip cut mid-jump): the retargeter then measures heights from the floor
+#: the person lands on, and so do the human-referenced metrics. The shared clips' floors lie at
+#: most 3.2 cm under their first samples' lowest foot points, a jump's apex 20-40 cm over them.
+AIR_START = 0.10
+
 #: Support phases, as stored in runs.
 PHASES = ("double", "left", "right")
 SIDES = ("left", "right")
@@ -146,6 +152,12 @@ class SupportPhaseDetector:
     def feet(self) -> dict[str, bool]:
         """Side -> the foot is in support (after hysteresis and ``min_duration``)."""
         return dict(self._support)
+
+    @property
+    def ground(self) -> float:
+        """The lowest ground height of the foot points seen so far [m] (``inf`` before any)."""
+        finite = [g for g in (self._ground or []) if math.isfinite(g)]
+        return min(finite) if finite else math.inf
 
     def update(self, t: float, left: npt.ArrayLike, right: npt.ArrayLike) -> str:
         """Add one sample of both feet; return the phase.
@@ -764,6 +776,7 @@ def _yaw(psi: float) -> np.ndarray:
 
 
 __all__ = [
+    "AIR_START",
     "PHASES",
     "clamp_to_polygon",
     "convex_hull",

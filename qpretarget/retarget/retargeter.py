@@ -57,7 +57,13 @@ import pinocchio as pin
 from ..constraints.contacts import Contacts
 from ..control.controller import Controller
 from ..errors import ConfigError
-from ..motion.calibration import Calibration, calibrate, nearest_rotation
+from ..motion.calibration import (
+    UPRIGHT_TILT,
+    Calibration,
+    body_tilt,
+    calibrate,
+    nearest_rotation,
+)
 from ..motion.human_motion import HumanMotion, MotionError
 from ..motion.keypoints import (
     KEYPOINT_NAMES,
@@ -65,6 +71,7 @@ from ..motion.keypoints import (
     resolve_keypoint_map,
 )
 from ..motion.phases import (
+    AIR_START,
     SIDES,
     PhaseThresholds,
     SupportCommand,
@@ -139,6 +146,8 @@ class Retargeter:
         self._setup_robot()
         self._stream: KeypointStream | None = None
         self._record = True
+        #: The run's notes on its input (``support phases: ...``; also in the run's messages).
+        self.notes: list[str] = []
 
     def __repr__(self) -> str:
         """Tasks, scaling, filter, rate."""
@@ -459,6 +468,12 @@ class Retargeter:
             for fb in self.support.feet.values():  # a run may follow one that ended in flight
                 ctrl.set_weight_scale(fb.task, 1.0)
         self._feet_warned = False
+        self.notes = []
+        #: Why the start posture is held (the person not upright at calibration), or "".
+        self._held = ""
+        #: The person's lowest foot point at calibration [m] (``None``: no foot key-points).
+        self._foot_low0: float | None = None
+        self._air_warned = False
         #: Feet standing at the run's first tick (the initial stance may start on one foot).
         self._initial_standing: tuple[str, ...] = SIDES
         self._first_targets: dict[str, tuple[np.ndarray | None, np.ndarray | None]] = {}
@@ -505,6 +520,11 @@ class Retargeter:
         # Waist yaw at calibration (feet yaw fallback when the motion has no toes).
         first = unpacked[0]
         self._waist_yaw_cal = waist_yaw(first[0], first[1])
+        self._check_upright(human)
+        feet = [first[0][f"{s}_{p}"] for s in SIDES for p in ("ankle", "toe", "heel")
+                if f"{s}_{p}" in first[0]]  # fmt: skip
+        lows = [float(p[2]) for p in feet if np.all(np.isfinite(p))]
+        self._foot_low0 = min(lows) if lows else None
 
     def _tick(self, t: float, y: np.ndarray) -> list[Command]:
         """Process one control-rate sample (after the first ``calibration.frames``, all held)."""
@@ -518,11 +538,105 @@ class Retargeter:
             if len(self._calibration_samples) < self.spec.calibration_frames:
                 return []
             self._calibrate(self._calibration_samples)
-            if self.stepper is not None and self._sup.stepping.initial_stance:
+            if self.stepper is not None and self._sup.stepping.initial_stance and not self._held:
                 self._initial_stance(self._calibration_samples[0][1])
             pending, self._pending = self._pending, []
             return [self._process(tp, yp) for tp, yp in pending]
         return [self._process(t, y)]
+
+    def _check_upright(self, human: Mapping[str, np.ndarray]) -> None:
+        """Hold the start posture when the person is not upright at calibration.
+
+        Bad input of issue 15: a skeleton lying down (or upside down, or read with the wrong
+        up axis) has no feet to stand on, and scaling it rooted at the robot's feet put the
+        robot's pelvis 34 cm lower, a silent crouch (the walk turned 90 deg: pelvis 0.41 m
+        against 0.75). When the mid-ankle -> waist axis is more than
+        :data:`~qpretarget.motion.calibration.UPRIGHT_TILT` from the vertical at calibration
+        (:func:`~qpretarget.motion.calibration.body_tilt`), every task keeps its start pose and
+        both feet stay planted for the whole run, and a message says so and how to fix it (a
+        config without feet, no support section, follows the motion as read: the message
+        only).
+        """
+        tilt = body_tilt(human)
+        if tilt is None or tilt <= UPRIGHT_TILT:
+            return
+        what = "upside down?" if tilt > 135.0 else "lying down?"
+        read = self._require_stream().skeleton.meta.get("up_axis")
+        other = {"y": "z", "z": "y"}.get(str(read))
+        axis = (
+            f"it was read with the wrong up axis ({read}): `--up-axis {other}` on the command "
+            f'line, load_motion(path, up_axis="{other}") in Python'
+            if other
+            else "its up axis is not z: turn it z-up (BVH and AMC: `--up-axis`)"
+        )
+        legs = self.stepper is not None or self.sequencer is not None
+        done = (
+            "The robot holds its starting posture, both feet planted, for the whole run."
+            if legs
+            else "It is followed as read (no feet to keep planted in this config)."
+        )
+        message = (
+            f"support phases: the person is not upright at the start: the body axis (ankles to "
+            f"waist) is {tilt:.0f} deg from the vertical ({what}). {done} If the person stands "
+            f"in the file, {axis} (docs/motion.md)."
+        )
+        self._note(message)
+        if legs:
+            self._held = message
+
+    def _check_air_start(self, t: float) -> None:
+        """Measure heights from the floor when the motion started in the air.
+
+        Bad input of issue 15: calibrated on a person in the air (a clip cut mid-jump), the
+        kinematic pelvis height (:meth:`~qpretarget.retarget.rooting.Rooting.waist_goal`)
+        counted every later stance as a crouch (the playground jumps cut at a flight's apex:
+        the robot's pelvis 17-26 cm under its standing height at the landings; pelvis height
+        error against the floor, RMS, 7.5 cm, now 4.5). Once the lowest foot point seen
+        (:attr:`~qpretarget.motion.phases.SupportPhaseDetector.ground`, causal) lies more than
+        :data:`~qpretarget.motion.phases.AIR_START` under the person's lowest foot point at
+        calibration, that depth is the rooting's ``ground_drop`` (kept up to date while it
+        grows) and a message says so (once). Until then the detector reads the falling feet
+        as standing: the robot stood on both feet. The shared clips' floors lie at most 3.2 cm
+        under their first samples' lowest foot points.
+        """
+        if self._rooting is None or self._foot_low0 is None or self.stepper is None:
+            return
+        if self._held:  # the start posture held: no heights to measure
+            return
+        drop = self._foot_low0 - self.detector.ground
+        if not drop > max(AIR_START, self._rooting.ground_drop):
+            return
+        self._rooting.ground_drop = drop
+        if not self._air_warned:
+            self._air_warned = True
+            t0 = t if self._t_first is None else self._t_first
+            self._note(
+                f"support phases: the motion starts in the air: at {t - t0:.2f} s the person's "
+                f"feet are {100 * drop:.0f} cm under their lowest point at the first sample, "
+                "where the run was calibrated. Pelvis heights are measured from that floor "
+                "from then on; until then the robot stood on both feet. Start the clip where "
+                "the person stands to follow the first part too."
+            )
+
+    def _note(self, message: str) -> None:
+        """A note on the input: in :attr:`notes` and the run's messages."""
+        self.notes.append(message)
+        self._rec.rows["messages"].append(message)
+
+    def _hold_targets(self) -> dict[str, Any]:
+        """Every bound frame task's start pose (:meth:`_check_upright`)."""
+        out: dict[str, Any] = {}
+        for name, (p, R) in self._ramp_start.items():
+            task = self.controller.tasks.get(name)
+            if not isinstance(task, FrameTask):
+                continue
+            if task.has_position and task.has_orientation:
+                out[name] = pin.SE3(R, p).homogeneous
+            elif task.has_position:
+                out[name] = p.copy()
+            elif task.has_orientation:
+                out[name] = R.copy()
+        return out
 
     def _initial_stance(self, y: np.ndarray) -> None:
         """Start in the person's first-sample stance (``stepping.initial_stance``).
@@ -618,6 +732,7 @@ class Retargeter:
                    for s in SIDES}  # fmt: skip
             if pts["left"] and pts["right"]:
                 phase = self.detector.update(t, np.array(pts["left"]), np.array(pts["right"]))
+                self._check_air_start(t)
                 if self.stepper is not None and self.detector.flight:
                     phase = "flight"
                 if self.stepper is not None:
@@ -625,7 +740,7 @@ class Retargeter:
             elif self.stepper is not None and not self._feet_warned:
                 # No foot key-points: no phase to switch contacts from; the feet stay planted.
                 self._feet_warned = True
-                self._rec.rows["messages"].append(
+                self._note(
                     f"support phases: the motion has no foot key-points (ankle, toe or heel of "
                     f"both feet; key-point map {stream.kmap.name!r}): both feet stay planted. Map "
                     "the feet in the key-point map (docs/motion.md) to make the robot step."
@@ -640,7 +755,7 @@ class Retargeter:
         support_state = ""
         cmd: SupportCommand | StepCommand | None = None
         seq: SupportCommand | None = None
-        if self.sequencer is not None:
+        if self.sequencer is not None and not self._held:
             feet = self._fs
             soles = {s: state.frame_placement(feet.sole_ids[s]).copy() for s in SIDES}
             com = state.com()
@@ -664,18 +779,23 @@ class Retargeter:
                 scaled = {k: (v if k in FOOT_POINTS else v + shift) for k, v in scaled.items()}
 
         # 3'. Kinematic stepping: each foot's contact follows the person's foot.
-        if self.stepper is not None:
+        if self.stepper is not None and not self._held:
             step = self._step(t, scaled, kp, rots)
             support_state = step.label
             cmd = step
 
-        # 4. Task targets (ramped in from the reference posture over ramp_time).
+        # 4. Task targets (ramped in from the reference posture over ramp_time); the start
+        #    posture held while the person is not upright (:meth:`_check_upright`).
         first = self._first_targets if self.stepper is not None else None
         ramp = self._ramp(t)
-        self.binding.task_targets(
-            targets, cal, self.task_reference, ramp, self._skipped, scaled, kp, rots, missing,
-            first, self._ramp_start,
-        )  # fmt: skip
+        if self._held:
+            targets.update(self._hold_targets())
+            support_state = "stance/stance" if self.stepper is not None else ""
+        else:
+            self.binding.task_targets(
+                targets, cal, self.task_reference, ramp, self._skipped, scaled, kp, rots,
+                missing, first, self._ramp_start,
+            )  # fmt: skip
         if seq is not None and self._sup.com_task is not None:
             com_task = cast(ComTask, ctrl.tasks[self._sup.com_task])
             full = np.array(com_task.target, dtype=float)
@@ -913,7 +1033,7 @@ class Retargeter:
         standing = [s for s in SIDES if states[s] in ("stance", "tiptoe")]
         if not standing or any(states[s] not in ("stance", "tiptoe", "swing") for s in SIDES):
             return
-        goal = self._rooting.waist_height + self._leg_scale * (z - self._cal.human_waist[2])
+        goal = self._rooting.waist_goal(z)
         robot = float(self.com_estimate.robot_point("waist", self.controller.state.data)[2])
         if goal - robot > st.takeoff_gap:
             self._takeoff_t = t

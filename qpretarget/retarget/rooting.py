@@ -90,6 +90,23 @@ class Rooting:
         self.planted: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         #: side -> ankle of each standing robot foot at the last tick.
         self.standing_now: dict[str, np.ndarray] = {}
+        #: How far the floor the person stands on lies under the person's lowest foot point at
+        #: calibration [m] (set by the retargeter: a motion that starts in the air, 0 else).
+        self.ground_drop = 0.0
+
+    def waist_goal(self, z_h: float) -> float:
+        r"""The kinematic pelvis height of a person's waist height ``z_h`` [m].
+
+        :math:`z^* = z_0 + s\,(z_h - (z_h^{cal} - \delta))` with :math:`z_0` the robot's waist
+        height matching the person's at calibration (:attr:`waist_height`), :math:`s` the
+        leg-length ratio and :math:`\delta` = :attr:`ground_drop` (0 unless the person was in
+        the air at calibration: then the height is measured from the floor they land on, not
+        from where they were, which put every later stance 0.2 m lower: a crouch the person
+        did not do).
+        """
+        return self.waist_height + self.leg_scale * (
+            z_h - (float(self.calibration.human_waist[2]) - self.ground_drop)
+        )
 
     def scale(
         self,
@@ -206,14 +223,12 @@ class Rooting:
                 # ball of the foot, the robot's flat sole with its leg at full reach leaves
                 # 12-15 cm lower, and the whole flight kept that offset (root height 18-22 cm
                 # off on the playground jumps, landings with a knee 3 cm over the floor).
-                waist[2] = self.waist_height + self.leg_scale * (
-                    human["waist"][2] - cal.human_waist[2]
-                )
+                waist[2] = self.waist_goal(float(human["waist"][2]))
             if np.all(np.isfinite(waist)):
                 return self.scaler.scale_rooted(human, "waist", waist)
         scaled = self.scaler.scale(human, support=root, anchors=anchors)
         if self.kinematic and root in SIDES and self.scaler.method == "poubel":
-            z = self.waist_height + self.leg_scale * (human["waist"][2] - cal.human_waist[2])
+            z = self.waist_goal(float(human["waist"][2]))
             dz = z - scaled["waist"][2]
             if math.isfinite(dz):
                 fixed = anchors_points(anchors)

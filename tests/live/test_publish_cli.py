@@ -154,6 +154,32 @@ def test_live_records_the_retargeter_only_for_run(
     assert len(np.load(out)["q"]) > 5
 
 
+def test_live_prints_the_retargeters_notes(
+    configs_dir: Path, mocap_dir: Path, monkeypatch, capsys
+) -> None:
+    """A stream whose person lies (here a file turned 90 deg about x: a suit streaming with
+    the wrong up axis) is held in the start posture, and the end-of-run report says why."""
+    import dataclasses
+
+    import qpretarget.motion as motion_pkg
+
+    load = motion_pkg.load_motion
+    R = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+    def lying(path, **kw):  # noqa: ANN001, ANN003, ANN202
+        m = load(path, **kw)
+        ori = np.einsum("ab,tjbc->tjac", R, m.orientations)
+        return dataclasses.replace(m, positions=m.positions @ R.T, orientations=ori)
+
+    monkeypatch.setattr(motion_pkg, "load_motion", lying)
+    code = main(["live", str(configs_dir / "g1_whole_body.yaml"), "--source",
+                 f"file:{mocap_dir / 'cmu_16_15_walk.bvh'}", "--speed", "4", "--duration",
+                 "1.0", "--quiet"])  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "note: support phases: the person is not upright at the start" in text
+
+
 def test_command_errors_are_one_line(tmp_path: Path, configs_dir: Path, capsys) -> None:
     cfg = str(configs_dir / "g1_whole_body.yaml")
     for argv, msg in [
