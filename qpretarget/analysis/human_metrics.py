@@ -583,8 +583,11 @@ def format_human_metrics(m: Mapping[str, Any]) -> list[str]:
         return "-" if x is None else format(x, spec)
 
     rt, hd, ph = m["root_travel"], m["heading_error_deg"], m["pelvis_height_error_m"]
+    air = m.get("start_in_air_m")
+    floor = "" if air is None else f"; in the air at t0, heights aligned {air * 100:.0f} cm up"
     lines = [
-        f"vs the person (scaled by the leg ratio {m['leg_length_ratio']:.3f}, aligned at t0):",
+        f"vs the person (scaled by the leg ratio {m['leg_length_ratio']:.3f}, aligned at t0"
+        f"{floor}):",
         f"  root travel     robot {rt['robot_m']:.2f} m / human {rt['human_m']:.2f} m "
         f"(ratio {f(rt['ratio'])})",
         f"  heading error   max {hd['max']:.1f} deg, final {hd['final']:.1f} deg "

@@ -1344,6 +1344,9 @@ def test_a_motion_starting_in_the_air_measures_heights_from_the_floor():
     assert len(notes) == 1
     m = human_metrics(traj, ctrl.robot)
     assert 0.1 < m["start_in_air_m"] < 0.2  # s times the person's 19 cm
+    from qpretarget.analysis.human_metrics import format_human_metrics
+
+    assert "in the air at t0, heights aligned" in format_human_metrics(m)[0]
     assert m["pelvis_height_error_m"]["rms"] <= 0.065
     phases = list(traj.extra["human_phase"])
     states = list(traj.extra["support_state"])
