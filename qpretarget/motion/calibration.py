@@ -491,15 +491,16 @@ def _heading_from_points(points: Mapping[str, np.ndarray]) -> float:
 
 
 #: Largest tilt of the person's body axis from the vertical at calibration for a standing
-#: person [deg] (:func:`body_tilt`): a deep squat or a bow keeps the waist within about 45 deg
-#: of straight over the ankles; lying down is about 90, upside down 180.
+#: person [deg] (:func:`body_tilt`): a deep squat, a bow or a kick keeps the waist within about
+#: 45 deg of straight over the standing ankle; lying down is about 90, upside down 180.
 UPRIGHT_TILT = 60.0
 
 
 def body_tilt(points: Mapping[str, npt.ArrayLike]) -> float | None:
     r"""Tilt of the person's body axis from the vertical [deg]: lying down about 90.
 
-    The axis runs from the mid-ankle point :math:`a = (a_l + a_r)/2` to the waist :math:`w`:
+    The axis runs from the lower ankle :math:`a` (the standing foot's: a kick's raised foot does
+    not tilt it) to the waist :math:`w`:
     :math:`\theta = \arccos\big((w - a)_z / \lVert w - a \rVert\big)`, the median over the
     samples given (``(3,)`` or ``(N, 3)`` arrays of ``waist``, ``left_ankle`` and
     ``right_ankle``; samples with a missing point are left out). ``None`` without those
@@ -509,7 +510,9 @@ def body_tilt(points: Mapping[str, npt.ArrayLike]) -> float | None:
     if not all(k in points for k in need):
         return None
     w, al, ar = (np.asarray(points[k], float).reshape(-1, 3) for k in need)
-    d = w - 0.5 * (al + ar)
+    ok_l, ok_r = np.all(np.isfinite(al), axis=1), np.all(np.isfinite(ar), axis=1)
+    a = np.where((ok_l & (~ok_r | (al[:, 2] <= ar[:, 2])))[:, None], al, ar)
+    d = w - a
     n = np.linalg.norm(d, axis=1)
     ok = np.isfinite(n) & (n > 1e-6)
     if not ok.any():

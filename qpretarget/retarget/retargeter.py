@@ -550,7 +550,7 @@ class Retargeter:
         Bad input of issue 15: a skeleton lying down (or upside down, or read with the wrong
         up axis) has no feet to stand on, and scaling it rooted at the robot's feet put the
         robot's pelvis 34 cm lower, a silent crouch (the walk turned 90 deg: pelvis 0.41 m
-        against 0.75). When the mid-ankle -> waist axis is more than
+        against 0.75). When the standing ankle -> waist axis is more than
         :data:`~qpretarget.motion.calibration.UPRIGHT_TILT` from the vertical at calibration
         (:func:`~qpretarget.motion.calibration.body_tilt`), every task keeps its start pose and
         both feet stay planted for the whole run, and a message says so and how to fix it (a
@@ -576,9 +576,9 @@ class Retargeter:
             else "It is followed as read (no feet to keep planted in this config)."
         )
         message = (
-            f"support phases: the person is not upright at the start: the body axis (ankles to "
-            f"waist) is {tilt:.0f} deg from the vertical ({what}). {done} If the person stands "
-            f"in the file, {axis} (docs/motion.md)."
+            "support phases: the person is not upright at the start: the body axis (standing "
+            f"ankle to waist) is {tilt:.0f} deg from the vertical ({what}). {done} If the person "
+            f"stands in the file, {axis} (docs/motion.md)."
         )
         self._note(message)
         if legs:

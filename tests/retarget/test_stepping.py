@@ -1368,12 +1368,18 @@ def test_body_tilt_and_the_detectors_floor():
     from qpretarget.motion.phases import SupportPhaseDetector
     from qpretarget.retarget.rooting import Rooting
 
+    # From the lower (standing) ankle to the waist, degrees from the vertical.
     up = {"waist": [0.0, 0.0, 1.0], "left_ankle": [0.0, 0.1, 0.1], "right_ankle": [0.0, -0.1, 0.1]}
-    assert body_tilt(up) == pytest.approx(0.0, abs=1e-9)
+    assert body_tilt(up) == pytest.approx(math.degrees(math.atan2(0.1, 0.9)), abs=1e-9)
     lying = {"waist": [1.0, 0.0, 0.1], "left_ankle": [0.0, 0.1, 0.1], "right_ankle": [0, -0.1, 0.1]}
     assert body_tilt(lying) == pytest.approx(90.0, abs=1e-9)
     squat = {"waist": [0.3, 0.0, 0.5], "left_ankle": [0.0, 0.1, 0.1], "right_ankle": [0, -0.1, 0.1]}
-    assert body_tilt(squat) < UPRIGHT_TILT  # a deep squat, hips behind the heels: 37 deg
+    assert body_tilt(squat) < UPRIGHT_TILT  # a deep squat, hips behind the heels: 38 deg
+    # A kick at head height: the standing ankle sets the axis (the mid-ankle point: 63 deg).
+    kick = {"waist": [0.0, 0.0, 1.0], "left_ankle": [0.6, 0.1, 1.2], "right_ankle": [0, -0.1, 0.1]}
+    assert body_tilt(kick) == pytest.approx(math.degrees(math.atan2(0.1, 0.9)), abs=1e-9)
+    one = dict(kick, left_ankle=[np.nan, 0.0, 0.0])  # a missing ankle: the other one
+    assert body_tilt(one) == pytest.approx(body_tilt(kick), abs=1e-9)
     assert body_tilt({"waist": [0.0, 0.0, 1.0]}) is None
     nan = dict(up, waist=[np.nan, 0.0, 1.0])
     assert body_tilt(nan) is None
