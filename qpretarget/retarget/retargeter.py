@@ -591,11 +591,11 @@ class Retargeter:
         kinematic pelvis height (:meth:`~qpretarget.retarget.rooting.Rooting.waist_goal`)
         counted every later stance as a crouch (the playground jumps cut at a flight's apex:
         the robot's pelvis 17-26 cm under its standing height at the landings; pelvis height
-        error against the floor, RMS, 7.5 cm, now 4.5). Once the lowest foot point seen
-        (:attr:`~qpretarget.motion.phases.SupportPhaseDetector.ground`, causal) lies more than
-        :data:`~qpretarget.motion.phases.AIR_START` under the person's lowest foot point at
-        calibration, that depth is the rooting's ``ground_drop`` (kept up to date while it
-        grows) and a message says so (once). Until then the detector reads the falling feet
+        error against the floor over 2.05-5.0 s, RMS, 7.5 cm, now 4.5). Once the lowest foot
+        point seen (:attr:`~qpretarget.motion.phases.SupportPhaseDetector.ground`, causal)
+        lies more than :data:`~qpretarget.motion.phases.AIR_START` under the person's lowest
+        foot point at calibration, that depth is the rooting's ``ground_drop`` (kept up to date
+        while it grows) and a message says so (once). Until then the detector reads the falling feet
         as standing: the robot stood on both feet. The shared clips' floors lie at most 3.2 cm
         under their first samples' lowest foot points.
         """
