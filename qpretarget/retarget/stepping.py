@@ -600,10 +600,7 @@ class KinematicStepper:
                         and (toe_rise or {}).get(other, 0.0) > 0.5 * st.toe_rise
                         and other_state in ("stance", "tiptoe", "toe_off")
                     )
-                    or (
-                        other_state in ("swing", "landing")
-                        and not (low or {}).get(other, False)
-                    )
+                    or (other_state in ("swing", "landing") and not (low or {}).get(other, False))
                 )
             )
             if state == "stance":
@@ -760,8 +757,13 @@ class KinematicStepper:
                     self._restep.discard(side)
                     self._enter(t, side, "landing")
                     # Put down where the person's foot is; a foot put down for the other's
-                    # re-step (handover) straight under itself.
+                    # re-step (handover) straight under itself, and so is one whose target
+                    # is unknown (the person's foot markers missing: a NaN landing spot left
+                    # the OpenSim C3D walk's foot hovering in `landing` to the end, and the
+                    # body rooted at it ran 1.8 m ahead).
                     d = soles[side] if side in self._handover else desired[side]
+                    if not (np.all(np.isfinite(d.translation)) and np.all(np.isfinite(d.rotation))):
+                        d = soles[side]
                     p = np.array([d.translation[0], d.translation[1], self.ground])
                     self._landing[side] = _flat(_yaw_of(d.rotation), p)
             elif state == "landing":

@@ -472,6 +472,29 @@ def test_in_flight_a_sole_yaw_target_turns_with_the_waist_and_slowly_against_it(
     assert after - before == pytest.approx(FOOT_YAW_RATE * dt, abs=1e-9)
 
 
+def test_a_foot_whose_target_is_unknown_lands_under_itself():
+    """A swing target with NaN (the person's foot markers missing, C3D gaps) is no landing
+    spot: the sole goes down where it is. A NaN spot left the OpenSim C3D walk's foot hovering
+    in ``landing`` to the end of the clip, and the body rooted at it ran 1.8 m ahead."""
+    st = KinematicStepper(StepSettings(), dt=0.01)
+    soles = {"left": _flat(0, 0.1, 0), "right": _flat(0, -0.1, 0)}
+    st.update(0.0, {"left": True, "right": True}, soles, soles, {})
+    up = {"left": True, "right": False}
+    desired = {"left": soles["left"], "right": _flat(0.2, -0.1, 0.05)}
+    for k in range(1, 20):
+        cmd = st.update(0.01 * k, up, soles, desired, {})
+    assert cmd.states["right"] == "swing"
+    soles["right"] = _flat(0.15, -0.12, 0.04)  # where the sole is when the person's foot lands
+    unknown = pin.SE3(np.eye(3), np.array([np.nan, np.nan, np.nan]))
+    cmd = st.update(0.2, {"left": True, "right": True}, soles, dict(desired, right=unknown), {})
+    assert cmd.states["right"] == "landing"
+    spot = st.landing_spot("right").translation
+    assert np.allclose(spot, [0.15, -0.12, 0.0])
+    soles["right"] = _flat(0.15, -0.12, 0.001)
+    cmd = st.update(0.21, {"left": True, "right": True}, soles, dict(desired, right=unknown), {})
+    assert cmd.states["right"] == "stance"
+
+
 def test_a_foot_the_person_moves_without_a_detected_lift_steps_there():
     settings = StepSettings()
     st = KinematicStepper(settings, dt=0.01)
