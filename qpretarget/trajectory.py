@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from .errors import QPRetargetError
-from .fileio import load_npz
+from .fileio import atomic_path, load_npz
 from .yamlio import load_yaml
 
 FORMAT = "qpretarget.run/1"
@@ -101,7 +101,7 @@ class RobotTrajectory:
         return float(np.median(np.diff(self.t))) if len(self.t) > 1 else 0.0
 
     def save(self, path: str | Path) -> Path:
-        """Write the ``.npz`` file (compressed) and return its path."""
+        """Write the ``.npz`` file (compressed, atomically) and return its path."""
         path = Path(path)
         if path.suffix != ".npz":
             path = path.with_suffix(".npz")
@@ -138,7 +138,8 @@ class RobotTrajectory:
             arrays[k] = np.asarray(a)
         if self.tau is not None:
             arrays["tau"] = np.asarray(self.tau, float)
-        np.savez_compressed(path, **arrays)
+        with atomic_path(path, suffix=".npz") as tmp:  # no half-written run file
+            np.savez_compressed(tmp, **arrays)
         return path
 
     @classmethod

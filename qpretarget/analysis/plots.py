@@ -62,8 +62,10 @@ def _figure(name: str) -> Any:
 
 
 def _save(fig: Any, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI)
+    from ..fileio import atomic_path
+
+    with atomic_path(path, suffix=path.suffix) as tmp:  # no half-written figure
+        fig.savefig(tmp, dpi=DPI)
     return path
 
 

@@ -440,17 +440,16 @@ class Comparison:
         """Write ``comparison.{csv,json,md}`` into directory ``out``, or the one file ``out``."""
         out = Path(out)
         writers = {".csv": self.to_csv, ".json": self.to_json, ".md": self.markdown_report}
+        from ..fileio import write_atomic
+
+        def save(path: Path, text: str) -> Path:  # atomically: no half-written file
+            return write_atomic(path, lambda f: f.write(text), binary=False)
+
         if out.suffix in writers:
             out.parent.mkdir(parents=True, exist_ok=True)
-            out.write_text(writers[out.suffix](), encoding="utf-8")
-            return [out]
+            return [save(out, writers[out.suffix]())]
         out.mkdir(parents=True, exist_ok=True)
-        paths = []
-        for suffix, w in writers.items():
-            p = out / f"comparison{suffix}"
-            p.write_text(w(), encoding="utf-8")
-            paths.append(p)
-        return paths
+        return [save(out / f"comparison{suffix}", w()) for suffix, w in writers.items()]
 
     def markdown_report(self) -> str:
         m = self.machine

@@ -135,7 +135,10 @@ def run(args: argparse.Namespace) -> int:
             "self_collision_violations": [int(x) for x in before.collision_violations_per_frame],
         }
     out.mkdir(parents=True, exist_ok=True)
-    (out / "metrics.json").write_text(dumps(metrics), encoding="utf-8")
+    from ..fileio import write_atomic
+
+    text = dumps(metrics)
+    write_atomic(out / "metrics.json", lambda f: f.write(text), binary=False)
     written = [out / "metrics.json"]
     if not args.no_figures:
         from ..analysis.plots import write_figures
