@@ -32,7 +32,7 @@ from typing import Any, Literal, overload
 import numpy as np
 
 from ..errors import ConfigError, QPRetargetError, missing_dependency
-from ..fileio import load_npz
+from ..fileio import load_npz, write_atomic
 
 
 class CloudFormatError(QPRetargetError, ValueError):
@@ -493,8 +493,8 @@ def write_ply(path: str | Path, points: np.ndarray, normals: np.ndarray | None =
             rec["n" + a] = normals[:, i]
     head = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {len(points)}\n"
     head += "".join(f"property float {c}\n" for c, _ in cols) + "end_header\n"
-    path.write_bytes(head.encode("ascii") + rec.tobytes())
-    return path
+    data = head.encode("ascii") + rec.tobytes()
+    return write_atomic(path, lambda f: f.write(data), binary=True)
 
 
 def _frames_from_stack(

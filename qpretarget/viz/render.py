@@ -290,19 +290,27 @@ class _FrameDrawer:
 
 def _write_frames(out: Path, frames: list[Any], fps: float) -> None:
     """Write the frames as an animated GIF, or an MP4 through imageio-ffmpeg."""
+    from ..fileio import atomic_path
+
     out.parent.mkdir(parents=True, exist_ok=True)
     if out.suffix.lower() == ".gif":
-        frames[0].save(
-            out, save_all=True, append_images=frames[1:], duration=int(round(1000 / fps)), loop=0
-        )
+        with atomic_path(out, suffix=".gif") as tmp:  # no half-written animation
+            frames[0].save(
+                tmp,
+                save_all=True,
+                append_images=frames[1:],
+                duration=int(round(1000 / fps)),
+                loop=0,
+            )
     else:
         try:
             import imageio.v2 as imageio
 
-            writer: Any = imageio.get_writer(out, fps=fps)  # the ffmpeg writer (append_data)
-            with writer as w:
-                for f in frames:
-                    w.append_data(np.asarray(f))
+            with atomic_path(out, suffix=out.suffix) as tmp:
+                writer: Any = imageio.get_writer(tmp, fps=fps)  # the ffmpeg writer
+                with writer as w:
+                    for f in frames:
+                        w.append_data(np.asarray(f))
         except Exception as exc:
             raise QPRetargetError(
                 f"writing {out.name} needs an MP4 encoder "
