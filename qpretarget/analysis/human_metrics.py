@@ -80,7 +80,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..motion.calibration import hip_heading
-from ..motion.phases import AIR_START
+from ..motion.phases import AIR_START, foot_points
 from ..robot import RobotModel, load_robot
 from ..trajectory import RobotTrajectory
 
@@ -226,7 +226,7 @@ def _air_start(kp: Mapping[str, np.ndarray]) -> float:
     How far the lowest foot point at the first sample is over the lowest over the run, when
     more than :data:`~qpretarget.motion.phases.AIR_START` (the person in the air there).
     """
-    feet = [kp[f"{x}_{p}"] for x in SIDES for p in ("ankle", "toe", "heel") if f"{x}_{p}" in kp]
+    feet = [kp[k] for x in SIDES for k in foot_points(kp, x)]
     if not feet:
         return 0.0
     z = np.stack([f[:, 2] for f in feet], axis=1)

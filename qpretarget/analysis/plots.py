@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import MissingDependencyError, install_hint
+from ..fileio import atomic_path
 from .metrics import MetricSeries
 
 #: Resolution of every figure [dots per inch].
@@ -62,8 +63,6 @@ def _figure(name: str) -> Any:
 
 
 def _save(fig: Any, path: Path) -> Path:
-    from ..fileio import atomic_path
-
     with atomic_path(path, suffix=path.suffix) as tmp:  # no half-written figure
         fig.savefig(tmp, dpi=DPI)
     return path

@@ -40,6 +40,7 @@ import pinocchio as pin
 from ..constraints.contacts import Contacts
 from ..control.controller import Controller
 from ..errors import ConfigError, QPRetargetError
+from ..fileio import write_atomic
 from ..tasks.frame import FrameTask
 from ..trajectory import RobotTrajectory
 from ..yamlio import load_yaml
@@ -440,7 +441,6 @@ class Comparison:
         """Write ``comparison.{csv,json,md}`` into directory ``out``, or the one file ``out``."""
         out = Path(out)
         writers = {".csv": self.to_csv, ".json": self.to_json, ".md": self.markdown_report}
-        from ..fileio import write_atomic
 
         def save(path: Path, text: str) -> Path:  # atomically: no half-written file
             return write_atomic(path, lambda f: f.write(text), binary=False)

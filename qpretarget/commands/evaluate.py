@@ -98,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     """Compute the metrics, write metrics.json and the figures, print a summary."""
     from ..analysis.human_metrics import human_metrics_or_reason
     from ..analysis.metrics import compute_series, dumps, summarize
+    from ..fileio import write_atomic
     from ..trajectory import RobotTrajectory
 
     out = Path(args.output)
@@ -135,8 +136,6 @@ def run(args: argparse.Namespace) -> int:
             "self_collision_violations": [int(x) for x in before.collision_violations_per_frame],
         }
     out.mkdir(parents=True, exist_ok=True)
-    from ..fileio import write_atomic
-
     text = dumps(metrics)
     write_atomic(out / "metrics.json", lambda f: f.write(text), binary=False)
     written = [out / "metrics.json"]

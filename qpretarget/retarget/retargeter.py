@@ -76,6 +76,7 @@ from ..motion.phases import (
     PhaseThresholds,
     SupportCommand,
     SupportPhaseDetector,
+    foot_points,
     min_jerk,
 )
 from ..motion.scaling import Scaler
@@ -471,6 +472,8 @@ class Retargeter:
         self.notes = []
         #: Why the start posture is held (the person not upright at calibration), or "".
         self._held = ""
+        #: The task targets of that hold (:meth:`_hold_targets`).
+        self._held_targets: dict[str, Any] = {}
         #: The person's lowest foot point at calibration [m] (``None``: no foot key-points).
         self._foot_low0: float | None = None
         self._air_warned = False
@@ -521,8 +524,7 @@ class Retargeter:
         first = unpacked[0]
         self._waist_yaw_cal = waist_yaw(first[0], first[1])
         self._check_upright(human)
-        feet = [first[0][f"{s}_{p}"] for s in SIDES for p in ("ankle", "toe", "heel")
-                if f"{s}_{p}" in first[0]]  # fmt: skip
+        feet = [first[0][k] for s in SIDES for k in foot_points(first[0], s)]
         lows = [float(p[2]) for p in feet if np.all(np.isfinite(p))]
         self._foot_low0 = min(lows) if lows else None
 
@@ -583,6 +585,7 @@ class Retargeter:
         self._note(message)
         if legs:
             self._held = message
+            self._held_targets = self._hold_targets()  # the start poses, fixed from now on
 
     def _check_air_start(self, t: float) -> None:
         """Measure heights from the floor when the motion started in the air.
@@ -789,7 +792,7 @@ class Retargeter:
         first = self._first_targets if self.stepper is not None else None
         ramp = self._ramp(t)
         if self._held:
-            targets.update(self._hold_targets())
+            targets.update(self._held_targets)
             support_state = "stance/stance" if self.stepper is not None else ""
         else:
             self.binding.task_targets(
