@@ -8,7 +8,8 @@ do what the person does with its feet: every foot is a small state machine,
 stance      6-D contact on, the sole pinned where it landed; it *pivots* in place (the anchor's
             yaw ramped towards the person's foot yaw) when the person's foot turns by more than
             ``pivot_yaw`` while staying within ``pivot_radius`` of where it landed and the other
-            foot swings, or by more than ``pivot_yaw_double`` with the other foot standing
+            foot swings (then to the end of the stance, wherever the foot goes), or by more
+            than ``pivot_yaw_double`` with the other foot standing
 toe_off     the person's heel rises while the other robot foot stands flat: contact off, the
             sole turned about the front edge of its rectangle (:meth:`KinematicStepper.toe_pose`)
 tiptoe      the person's heels both rise (the rise before a jump, reaching up on the toes), or
@@ -100,7 +101,8 @@ class StepSettings:
         min_stance: Shortest stance before a foot may lift again [s] (no flicker).
         lift_time: The swing target blends from the lift-off pose over this time [s].
         pivot_yaw: Turn of the person's stance foot that starts a pivot [rad] (15 deg).
-        pivot_radius: Largest motion of the person's foot (scaled) during a pivot [m].
+        pivot_radius: Largest motion of the person's foot (scaled) before a pivot starts [m]
+            (once started, the pivot follows the foot's yaw to the end of the stance).
         pivot_rate: Largest yaw rate of a pivoting anchor [rad/s].
         pivot_accel: Largest change rate of a pivoting anchor's yaw rate [rad/s^2]: the anchor
             speeds up and slows down smoothly (a pivot started at full rate in one tick asked
@@ -1091,7 +1093,9 @@ class KinematicStepper:
         A pivot starts once the person's foot turn since the pivot's reference sample (unwrapped:
         a dancer's 300 deg turn on one foot is followed the long way round) exceeds
         ``pivot_yaw`` with a point of the foot within ``pivot_radius`` of where it was
-        (:func:`_least_motion`). The anchor's yaw then goes to ``yaw``, the sole yaw the
+        (:func:`_least_motion`); once started it goes on to the end of the stance wherever the
+        person's foot moves (a turn that slides: the robot's sole turns in place). The
+        anchor's yaw then goes to ``yaw``, the sole yaw the
         person's foot asks for (the swing target's: the foot's yaw within the waist's range),
         else to its yaw at the start plus the person's turn; its rate is ramped
         (:meth:`_turn_anchor`). Aiming at the foot's yaw rather than adding the turn also takes
@@ -1113,7 +1117,16 @@ class KinematicStepper:
         turn += wrap_angle(yaw - yaw_last)
         start[0], start[1] = yaw, turn
         xy = _xy(points)
-        if xy.shape != xy0.shape or _least_motion(xy, xy0) > st.pivot_radius:
+        if xy.shape != xy0.shape:
+            return self._turn_anchor(side, None)
+        if not active and _least_motion(xy, xy0) > st.pivot_radius:
+            # A pivot starts only with the foot in place; once started it follows the
+            # person's foot yaw for the rest of the stance even when the foot then moves (a
+            # turn on the ball of the foot that slides): the robot's sole turns in place. A
+            # pivot stopped there left the karate kata played 1.25 times faster with its
+            # anchor 94 deg behind the person's foot and the pelvis twisted 160 deg over it,
+            # the heading 135 deg off to the end of the clip (docs/retargeting.md, *Pivots
+            # that go on*).
             return self._turn_anchor(side, None)
         if not active:
             if abs(turn) < (st.pivot_yaw if threshold is None else threshold):
