@@ -987,6 +987,26 @@ def test_talos_walks_with_the_person_too():
     assert _limit_overshoot(traj, ctrl.robot) <= 1e-9
 
 
+def test_talos_turns_with_the_person_through_the_kata():
+    """Talos's config pivots its stance feet since stop 36 (with land_reach 3 cm).
+
+    Before, with its pivots off, the kata's 100-180 deg turns on one foot left the robot
+    facing 134 deg away at the end and its pelvis folded over (lean error 198 deg, pelvis 47 cm
+    off, ankle error 0.384 leg lengths). Measured now: final heading 0.2 deg, lean 46 deg,
+    pelvis 20.6 cm, ankle 0.266, stance slip 0.52 mm. Bounds: final heading 15 deg (the chaotic
+    clip moves by a few degrees), lean 90 deg, ankle 0.33, slip under issue 15's 1 mm.
+    """
+    ctrl = Controller.from_yaml(REPO / "configs" / "talos_whole_body.yaml")
+    traj = Retargeter(ctrl).retarget(load_motion(MOCAP / "cmu_135_06_karate_kata.bvh"))
+    m = human_metrics(traj, ctrl.robot)
+    assert abs(m["heading_error_deg"]["final"]) <= 15.0
+    assert m["pelvis_tilt_error_deg"]["max"] <= 90.0
+    assert m["ankle_displacement_error_legs"]["rms"] <= 0.33
+    assert m["stance_slip_mm"]["max"] < 1.0
+    assert m["held_ticks"] == 0
+    assert _limit_overshoot(traj, ctrl.robot) <= 1e-9
+
+
 def test_the_robot_stands_on_one_leg_when_the_person_does():
     traj, m, ctrl = _run("cmu_49_18_one_leg_balance.bvh")
     # Whenever the person's foot is up (>= 3 cm), the robot's is off the ground: 99 % measured
