@@ -1113,9 +1113,14 @@ class KinematicStepper:
             return self._turn_anchor(side, None)
         yaw_last, turn, xy0, anchor_yaw0, active = start
         st = self.settings
-        yaw, points = foot
-        turn += wrap_angle(yaw - yaw_last)
-        start[0], start[1] = yaw, turn
+        # The person's foot yaw is in the capture's frame: only its change counts (the goal
+        # below is ``yaw``, the robot's frame). Until stop 36 it was unpacked into ``yaw``
+        # itself, and the pivots aimed at the capture frame's yaw: off by the person's heading
+        # at calibration (10 deg on the karate kata; a clip turned 180 deg about the vertical
+        # ended 355 deg off).
+        foot_yaw, points = foot
+        turn += wrap_angle(foot_yaw - yaw_last)
+        start[0], start[1] = foot_yaw, turn
         xy = _xy(points)
         if xy.shape != xy0.shape:
             return self._turn_anchor(side, None)
