@@ -545,7 +545,8 @@ class KinematicStepper:
             human_support: side -> the person's foot is in support (detector, with hysteresis).
             soles: side -> current sole pose of the robot.
             desired: side -> sole pose from the scaled person (scaled ankle, foot yaw, flat).
-            human_foot: side -> ``(yaw [rad], scaled points)`` of the person's foot (its ankle
+            human_foot: side -> ``(yaw [rad], scaled points)`` of the person's foot (the yaw in
+                the capture's frame: only its change counts; its ankle
                 ``(3,)``, or ankle and toe ``(2, 3)``: a pivot keeps one of them within
                 ``pivot_radius``), or ``None`` when unknown (no pivots then).
             flight: The person is in flight (both feet up; default: neither foot in support).
