@@ -19,6 +19,7 @@ import yaml
 from qpretarget import Controller
 from qpretarget.analysis.human_metrics import human_metrics
 from qpretarget.motion import load_motion
+from qpretarget.motion.human_motion import HumanMotion
 from qpretarget.retarget import Retargeter
 from qpretarget.retarget.stepping import KinematicStepper, StepSettings
 
@@ -838,9 +839,15 @@ def test_a_slow_foot_near_the_floor_is_stood_on_when_the_other_is_up():
 
 
 # ------------------------------------------------------------------------------ shared clips
-def _run(clip: str, start: float | None = None, end: float | None = None):
-    ctrl = Controller.from_yaml(CONFIG)
-    motion = load_motion(MOCAP / clip)
+def _run(
+    clip: str | HumanMotion,
+    start: float | None = None,
+    end: float | None = None,
+    config: Path = CONFIG,
+):
+    """Retarget a shared clip (file name) or a motion with ``config``; the run, metrics, ctrl."""
+    ctrl = Controller.from_yaml(config)
+    motion = load_motion(MOCAP / clip) if isinstance(clip, str) else clip
     traj = Retargeter(ctrl).retarget(motion, start=start, end=end)
     return traj, human_metrics(traj, ctrl.robot), ctrl
 
@@ -1005,9 +1012,9 @@ def test_talos_turns_with_the_person_through_the_kata():
     pelvis 22.5 cm, ankle 0.270, stance slip 0.07 mm. Bounds: final heading 15 deg (the chaotic
     clip moves by a few degrees), lean 90 deg, ankle 0.33, slip under issue 15's 1 mm.
     """
-    ctrl = Controller.from_yaml(REPO / "configs" / "talos_whole_body.yaml")
-    traj = Retargeter(ctrl).retarget(load_motion(MOCAP / "cmu_135_06_karate_kata.bvh"))
-    m = human_metrics(traj, ctrl.robot)
+    traj, m, ctrl = _run(
+        "cmu_135_06_karate_kata.bvh", config=REPO / "configs" / "talos_whole_body.yaml"
+    )
     assert abs(m["heading_error_deg"]["final"]) <= 15.0
     assert m["pelvis_tilt_error_deg"]["max"] <= 90.0
     assert m["ankle_displacement_error_legs"]["rms"] <= 0.33
@@ -1548,15 +1555,21 @@ def test_a_squat_flexes_the_hips_past_the_rest_rule_without_touching():
     assert audit is not None and audit.penetrating_frames == 0
 
 
-def _warped(clip: str, speed: float, mirror: bool):
-    """A shared clip played ``speed`` times faster, mirrored left/right if ``mirror``.
+def _transformed(
+    clip: str,
+    speed: float = 1.0,
+    mirror: bool = False,
+    turn_deg: float = 0.0,
+    shift: tuple[float, float, float] = (0.0, 0.0, 0.0),
+):
+    """A shared clip played ``speed`` times faster, mirrored left/right, turned about the
+    vertical by ``turn_deg`` and moved by ``shift`` [m] in the capture.
 
     Motions the shipped config was not tuned on, made from real ones: the mirror across the
     sagittal plane swaps the CMU skeleton's ``l``/``r`` joints and negates y (positions, and
-    the orientations conjugated by the reflection).
+    the orientations conjugated by the reflection); the turn rotates positions and
+    orientations.
     """
-    from qpretarget.motion.human_motion import HumanMotion
-
     m = load_motion(MOCAP / clip)
     names, pos, ori = m.names, np.array(m.positions), m.orientations
     if mirror:
@@ -1568,10 +1581,15 @@ def _warped(clip: str, speed: float, mirror: bool):
         pos[..., 1] *= -1.0
         F = np.diag([1.0, -1.0, 1.0])
         ori = None if ori is None else np.einsum("ij,tnjk,kl->tnil", F, ori, F)
+    if turn_deg:
+        c, s_ = math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))
+        R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+        pos = pos @ R.T
+        ori = None if ori is None else np.einsum("ij,tnjk->tnik", R, ori)
     return HumanMotion(
-        t=np.asarray(m.t) / speed, names=names, positions=pos, parents=m.parents,
-        orientations=ori, rate=m.rate * speed, source=f"{m.source} x{speed} mirror={mirror}",
-        meta=m.meta,
+        t=np.asarray(m.t) / speed, names=names, positions=pos + np.asarray(shift),
+        parents=m.parents, orientations=ori, rate=m.rate * speed,
+        source=f"{m.source} x{speed} mirror={mirror} turn={turn_deg}", meta=m.meta,
     )  # fmt: skip
 
 
@@ -1586,9 +1604,7 @@ def test_the_kata_played_faster_keeps_its_heading(mirror):
     on: measured max 25.7 / 25.1 deg, final 0.2 / -0.2 deg, ankle error 0.145 / 0.154.
     Bounds: final 10 deg, max 35 deg, ankle 0.18 (the chaotic clip moves by about 0.01-0.03).
     """
-    ctrl = Controller.from_yaml(CONFIG)
-    traj = Retargeter(ctrl).retarget(_warped("cmu_135_06_karate_kata.bvh", 1.25, mirror))
-    m = human_metrics(traj, ctrl.robot)
+    traj, m, ctrl = _run(_transformed("cmu_135_06_karate_kata.bvh", 1.25, mirror))
     assert abs(m["heading_error_deg"]["final"]) <= 10.0
     assert m["heading_error_deg"]["max"] <= 35.0
     assert m["ankle_displacement_error_legs"]["rms"] <= 0.18
@@ -1609,25 +1625,11 @@ def test_the_capture_s_heading_and_position_do_not_change_the_run():
     0.0864 in all three. Tolerances: 0.5 deg and 0.002 leg lengths (round-off grows through the
     chaotic clip's contact switches: the joints differ by up to 0.04 rad at some ticks).
     """
-    from qpretarget.motion.human_motion import HumanMotion
-
-    m = load_motion(MOCAP / "cmu_131_04_dance_spin.bvh")
-
-    def turned(deg: float, shift: tuple[float, float, float]) -> HumanMotion:
-        a = math.radians(deg)
-        R = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0, 0, 1]])
-        ori = None if m.orientations is None else np.einsum("ij,tnjk->tnik", R, m.orientations)
-        return HumanMotion(
-            t=m.t, names=m.names, positions=np.asarray(m.positions) @ R.T + np.array(shift),
-            parents=m.parents, orientations=ori, rate=m.rate, source=m.source, meta=m.meta,
-        )  # fmt: skip
-
     figures = []
     for deg, shift in ((0.0, (0.0, 0.0, 0.0)), (90.0, (0.0, 0.0, 0.0)), (180.0, (2.0, -1.0, 0.0))):
-        ctrl = Controller.from_yaml(CONFIG)
-        traj = Retargeter(ctrl).retarget(turned(deg, shift), end=4.0)
-        m_ = human_metrics(traj, ctrl.robot)
-        figures.append((m_["heading_error_deg"]["max"], m_["ankle_displacement_error_legs"]["rms"]))
+        motion = _transformed("cmu_131_04_dance_spin.bvh", turn_deg=deg, shift=shift)
+        _, m, _ = _run(motion, end=4.0)
+        figures.append((m["heading_error_deg"]["max"], m["ankle_displacement_error_legs"]["rms"]))
     for heading, ankle in figures[1:]:
         assert heading == pytest.approx(figures[0][0], abs=0.5)
         assert ankle == pytest.approx(figures[0][1], abs=0.002)
