@@ -19,9 +19,10 @@ HELP = """examples:
   qpretarget keypoints my_capture.bvh --template > my_skeleton.yaml
 
 Prints the joint (or marker) names of the file and the bundled key-point map picked for them
-(cmu, cgspeed, lafan1, mixamo, mvn_bvh, ...), key-point by key-point. When no bundled map fits,
-prints the closest one, the names it misses, and a map template to fill in (docs/motion.md);
-pass the filled file with `qpretarget retarget ... --keypoint-map my_skeleton.yaml`.
+(cmu, cgspeed, lafan1, mixamo, mvn_bvh, biovision, ...), key-point by key-point. When no
+bundled map fits, prints the closest one, the names it misses, and a map template to fill in
+(docs/motion.md); pass the filled file with `qpretarget retarget ... --keypoint-map
+my_skeleton.yaml`.
 """
 
 

@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
     for note in traj.meta.get("skipped_tasks", []):
         print(f"note: task {note!r} has no key-point in this motion; it kept its reference target")
     for message in traj.meta.get("messages", []):
-        if message.startswith("support phases:"):
+        if message.startswith(("support phases:", "key-points:")):
             print(f"note: {message}")
     print(f"wrote {out}")
     return 0

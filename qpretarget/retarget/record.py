@@ -143,6 +143,7 @@ def run_meta(
         "capture_rate": motion.rate,
         "control_rate": rate,
         "keypoint_map": stream.kmap.name,
+        "waist_lift_m": float(stream.lift or 0.0),
         "scaling": spec.scaling,
         "filter": {
             "cutoff_hz": None if stream.filter is None else stream.filter.cutoff_hz,

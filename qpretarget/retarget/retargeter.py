@@ -96,7 +96,7 @@ from .spec import (
     default_robot_keypoints,
 )
 from .stepping import KinematicStepper, StepCommand, blend_pose, swing_height_ramp
-from .stream import Command, KeypointStream, iter_frames
+from .stream import WAIST_ABOVE_HIPS, Command, KeypointStream, iter_frames
 from .support import FOOT_POINTS, ComEstimate, FootSupport
 from .whole_body import whole_body_config
 
@@ -505,6 +505,13 @@ class Retargeter:
             robot_foot_rotations=foot_R,
         )
         self.scaler = Scaler(self.calibration, self.spec.scaling)
+        if stream.lift:
+            self._note(
+                f"key-points: the skeleton's waist is rooted at (or near) its hip joints; its "
+                f"key-point is raised by {100 * stream.lift:.1f} cm to the pelvis centre the "
+                f"scaling expects ({WAIST_ABOVE_HIPS:g} leg lengths above the hips, as CMU's "
+                "root; docs/motion.md, *The waist key-point*)"
+            )
         cal = self._cal
         legs = [f"{side}_{p}" for side in SIDES for p in ("knee", "ankle")]
         robot_l = sum(cal.robot_lengths.get(k, math.nan) for k in legs)

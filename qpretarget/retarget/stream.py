@@ -18,6 +18,18 @@ from ..motion.human_motion import HumanMotion
 from ..motion.keypoints import KeypointMap
 from .spec import RetargetSpec
 
+#: Height of the waist key-point above the hip joints' midpoint that the scaling assumes, in leg
+#: lengths (hip to knee plus knee to ankle): the pelvis centre, as CMU's root (0.110-0.128 at the
+#: first frame of the 14 shared CMU clips, median 0.12; SMPL's pelvis joint sits about as high).
+WAIST_ABOVE_HIPS = 0.12
+#: A waist key-point lower than this above the hip joints' midpoint at the first frame (in leg
+#: lengths) is a skeleton rooted at the hip joints (Biovision / MotionBuilder and LAFAN1 about 0,
+#: Mixamo 0.08): it is raised to :data:`WAIST_ABOVE_HIPS` (:meth:`KeypointStream.waist_lift`).
+WAIST_ABOVE_HIPS_MIN = 0.09
+#: Largest lean of the trunk (waist to neck or head) from the vertical at the first frame for
+#: the waist height to be measured there [deg]: a person lying down is not measured.
+WAIST_LIFT_TILT = 45.0
+
 
 @dataclass(frozen=True)
 class Command:
@@ -72,6 +84,13 @@ class KeypointStream:
         )
         self.spline = CardinalSpline(skeleton.rate, rate_out, spec.tension)
         self._index = {name: skeleton.index(name) for name in kmap.source_names()}
+        #: How far the waist key-point is raised [m] (:meth:`waist_lift`; ``None`` until the
+        #: first frame is seen), and the waist joint's orientation at that frame.
+        self.lift: float | None = None
+        self._lift_R0: np.ndarray | None = None
+        self._waist_joint = kmap.orientations.get("waist")
+        if skeleton.orientations is None or self._waist_joint not in self._index:
+            self._waist_joint = None
 
     # A sample is [positions (3K), rotations (9M)]; the spline also carries K missing flags.
     def values_of(self, positions: Mapping[str, np.ndarray], rotations: Mapping[str, np.ndarray]):
@@ -83,6 +102,70 @@ class KeypointStream:
         pos = values[..., : 3 * self.K].reshape(values.shape[:-1] + (self.K, 3))
         return np.any(np.isnan(pos), axis=-1).astype(float)
 
+    def waist_lift(
+        self, points: Mapping[str, np.ndarray], waist_rotation: np.ndarray | None
+    ) -> float:
+        r"""How far to raise the waist key-point, from the first frame ``points`` [m].
+
+        The scaling roots the body at the feet (Poubel 2014 eq. 1): the robot's pelvis target
+        is as high above its ankles as the person's waist key-point above theirs, times the
+        leg-length ratio. Skeletons put their root at different heights: CMU's root is the
+        pelvis centre, :data:`WAIST_ABOVE_HIPS` leg lengths above the hip joints' midpoint
+        :math:`m`; Biovision's and LAFAN1's ``Hips`` sit at the hip joints. With those the
+        pelvis target was 8-9 cm lower on G1 and the robot crouched (knees at 1.5 rad on a
+        Biovision clip of a person standing still). With :math:`e = (w - m) \cdot \hat z` at
+        the first frame and :math:`\ell` the leg length (mean of both legs' hip-knee and
+        knee-ankle distances), the lift is
+
+        .. math:: \lambda = \ell\,\mathrm{WAIST\_ABOVE\_HIPS} - e
+            \quad \text{if } e < \ell\,\mathrm{WAIST\_ABOVE\_HIPS\_MIN}, \text{ else } 0,
+
+        and 0 when a point is missing or the trunk (waist to neck, else head) leans more than
+        :data:`WAIST_LIFT_TILT` from the vertical (a person lying down). The waist then moves
+        by :math:`\lambda R(t) R(0)^T \hat z` (:math:`R` the waist joint's orientation: the
+        lift turns with the pelvis), or :math:`\lambda \hat z` without orientations.
+        """
+        self._lift_R0 = None if waist_rotation is None else np.asarray(waist_rotation, float)
+        need = ("waist", "left_hip", "right_hip", "left_knee", "right_knee", "left_ankle",
+                "right_ankle")  # fmt: skip
+        p = {k: np.asarray(points[k], float).reshape(3) for k in need if k in points}
+        top = next((points[k] for k in ("neck", "head") if k in points), None)
+        if (
+            len(p) < len(need)
+            or top is None
+            or self._lift_R0 is not None
+            and not np.all(np.isfinite(self._lift_R0))
+        ):
+            return 0.0
+        trunk = np.asarray(top, float).reshape(3) - p["waist"]
+        if not (np.all(np.isfinite(trunk)) and all(np.all(np.isfinite(v)) for v in p.values())):
+            return 0.0
+        if trunk[2] < np.linalg.norm(trunk) * np.cos(np.radians(WAIST_LIFT_TILT)):
+            return 0.0
+        leg = 0.5 * sum(
+            np.linalg.norm(p[f"{s}_hip"] - p[f"{s}_knee"])
+            + np.linalg.norm(p[f"{s}_knee"] - p[f"{s}_ankle"])
+            for s in ("left", "right")
+        )
+        e = float(p["waist"][2] - 0.5 * (p["left_hip"][2] + p["right_hip"][2]))
+        if not leg > 0 or e >= WAIST_ABOVE_HIPS_MIN * leg:
+            return 0.0
+        return float(WAIST_ABOVE_HIPS * leg - e)
+
+    def _lifted(self, points: dict[str, np.ndarray], waist_rotation: np.ndarray | None) -> None:
+        """Raise ``points["waist"]`` (one frame (3,) or frames (T, 3)) by :attr:`lift`."""
+        if self.lift is None:
+            first = {k: np.asarray(v, float).reshape(-1, 3)[0] for k, v in points.items()}
+            r0 = None if waist_rotation is None else np.asarray(waist_rotation).reshape(-1, 3, 3)[0]
+            self.lift = self.waist_lift(first, r0)
+        if not self.lift or "waist" not in points:
+            return
+        up = np.array([0.0, 0.0, self.lift])
+        if waist_rotation is not None and self._lift_R0 is not None:
+            R = np.asarray(waist_rotation, float)
+            up = np.einsum("...ij,j->...i", R, self._lift_R0.T @ up)
+        points["waist"] = np.asarray(points["waist"], float) + up
+
     def frame_keypoints(self, frame: np.ndarray, rotations: np.ndarray | None):
         def position_of(name: str) -> np.ndarray:
             return frame[self._index[name]]
@@ -93,6 +176,10 @@ class KeypointStream:
             return rotations[self._index[name]]
 
         pts = self.kmap.evaluate(position_of, rotation_of if rotations is not None else None)
+        waist_R = None
+        if self._waist_joint is not None and rotations is not None:
+            waist_R = rotation_of(self._waist_joint)
+        self._lifted(pts, waist_R)
         rots = {o: rotation_of(self.kmap.orientations[o]) for o in self.orientations}
         return pts, rots
 
@@ -125,6 +212,10 @@ class KeypointStream:
             y = np.array([o[1] for o in outputs])
             return t_out, y, {k: np.array(v) for k, v in raw.items()}
         pts = self.kmap.positions(motion)
+        self._lifted(
+            pts,
+            None if self._waist_joint is None else motion.joint_orientation(self._waist_joint),
+        )
         rots = (
             {o: motion.joint_orientation(self.kmap.orientations[o]) for o in self.orientations}
             if self.orientations

@@ -24,7 +24,7 @@ import pinocchio as pin
 from ..errors import QPRetargetError, missing_dependency
 from ..trajectory import RobotTrajectory
 from .meshes import LinkMesh, load_link_meshes
-from .skeleton import beside_robot, skeleton_segments
+from .skeleton import beside_robot, human_samples, skeleton_segments
 
 
 @dataclass
@@ -245,6 +245,8 @@ class _FrameDrawer:
         self.light = light / np.linalg.norm(light)
         self.contacts = traj.contacts if traj.contacts is not None and traj.contacts.size else None
         self.targets = [traj.targets[k] for k in traj.task_names if k in traj.targets]
+        #: The human sample shown with each robot sample (the capture rate's, nearest in time).
+        self.human_k = human_samples(traj.human or {}, traj.t) if human else None
 
     def __call__(self, k: int, title: str) -> None:
         """Show sample ``k`` with ``title``."""
@@ -253,9 +255,8 @@ class _FrameDrawer:
         pin.forwardKinematics(robot.model, data, q)
         pin.updateFramePlacements(robot.model, data)
         self._robot_mesh()
-        if self.human:
-            hk = min(k, len(next(iter(self.human.values()))) - 1)
-            scene.bones.set_segments(skeleton_segments(self.human, hk))
+        if self.human and self.human_k is not None:
+            scene.bones.set_segments(skeleton_segments(self.human, int(self.human_k[k])))
         if robot.free_flyer:
             com = pin.centerOfMass(robot.model, data, q)
             scene.com_pt.set_data_3d([com[0]], [com[1]], [0.0])

@@ -84,3 +84,23 @@ def beside_robot(
         R0 = pin.Quaternion(q0[3:7]).toRotationMatrix()
         yaw = float(np.arctan2(R0[1, 0], R0[0, 0]))
     return place_beside(pts, base, yaw)
+
+
+def human_samples(human: Mapping[str, Any], t: np.ndarray) -> np.ndarray:
+    """Index of the human sample to show with each robot sample of times ``t`` [s].
+
+    The run's ``human`` tracks are at the capture rate and the robot at the control rate (a
+    120 Hz clip run at 100 Hz, a 30 Hz one at 100 Hz): the human sample nearest in time on the
+    motion's clock (``human["t"]``). Without ``human["t"]``, the sample of the same index,
+    clamped to the last.
+    """
+    t = np.asarray(t, float)
+    th = human.get("t")
+    if th is None or np.ndim(th) != 1 or len(th) == 0:
+        tracks = [np.asarray(v) for v in human.values() if np.ndim(v) == 2]
+        n = len(tracks[0]) if tracks else 1
+        return np.minimum(np.arange(len(t)), n - 1)
+    th = np.asarray(th, float)
+    i = np.clip(np.searchsorted(th, t), 1, max(len(th) - 1, 1))
+    before = np.abs(t - th[i - 1]) <= np.abs(th[np.minimum(i, len(th) - 1)] - t)
+    return np.where(before | (len(th) == 1), i - 1, i).astype(int)

@@ -28,7 +28,7 @@ from ..control.result import StepResult
 from ..errors import QPRetargetError, missing_dependency
 from ..robot import RobotModel
 from .meshes import load_link_meshes
-from .skeleton import beside_robot, skeleton_segments
+from .skeleton import beside_robot, human_samples, skeleton_segments
 
 
 class ViewerError(QPRetargetError, RuntimeError):
@@ -330,6 +330,8 @@ class _RunReplay:
         self.human = (
             beside_robot(traj.human, traj.q[0], viewer.robot.free_flyer) if traj.human else {}
         )
+        #: The human sample shown with each robot sample (the capture rate's, nearest in time).
+        self.human_k = human_samples(traj.human or {}, traj.t)
         gui = viewer.server.gui
         with gui.add_folder("Timeline"):
             self.slider = gui.add_slider(
@@ -379,7 +381,7 @@ class _RunReplay:
     def _draw_human(self, k: int) -> None:
         """The human skeleton beside the robot."""
         human = self.human
-        segs = skeleton_segments(human, min(k, len(next(iter(human.values()))) - 1))
+        segs = skeleton_segments(human, int(self.human_k[k]))
         if len(segs):
             self.handles["human"] = self.viewer.server.scene.add_line_segments(
                 "/human", segs.astype(np.float32), (240, 140, 20), thickness=0.02

@@ -46,6 +46,7 @@ CLIP_MAPS = [(name, "cmu") for name in CMU_CLIPS] + [
 
 def test_bundled_maps_are_listed():
     assert list_keypoint_maps() == [
+        "biovision",
         "cgspeed",
         "cmu",
         "human_description",

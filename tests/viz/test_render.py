@@ -30,3 +30,28 @@ def test_render_gif_frame_count_and_size(run_2s, tmp_path) -> None:
 def test_render_rejects_bad_extension(run_2s, tmp_path) -> None:
     with pytest.raises(QPRetargetError, match=r"use a \.gif or \.mp4 file name"):
         render_run(RobotTrajectory.load(run_2s), tmp_path / "clip.avi")
+
+
+def test_the_human_is_shown_at_the_robot_sample_s_time() -> None:
+    """The human tracks are at the capture rate, the run at the control rate.
+
+    Until stop 37 the human sample of the robot's index was drawn: a 30 Hz clip run at 100 Hz
+    showed the person 3.3 times too slowly (the last frame from a third of the run on), a 120 Hz
+    one 1.2 times too fast.
+    """
+    import numpy as np
+
+    from qpretarget.viz.skeleton import human_samples
+
+    t_human = np.arange(0, 3.0, 1 / 30)  # a 30 Hz capture
+    t_robot = np.arange(0, 3.0, 0.01)  # run at 100 Hz
+    k = human_samples({"t": t_human, "waist": np.zeros((len(t_human), 3))}, t_robot)
+    # Nearest in time: within half a capture period of each robot sample inside the capture
+    # (1e-12 s: round-off of the clocks), the last capture frame after it.
+    inside = t_robot <= t_human[-1]
+    assert np.max(np.abs(t_human[k] - t_robot)[inside]) <= 0.5 / 30 + 1e-12
+    assert np.all(k[~inside] == len(t_human) - 1) and k[150] == 45  # 1.5 s -> frame 45
+    # A run file without the human clock keeps the former index mapping, clamped.
+    assert human_samples({"waist": np.zeros((3, 3))}, np.arange(5) * 0.01).tolist() == [
+        0, 1, 2, 2, 2
+    ]  # fmt: skip
