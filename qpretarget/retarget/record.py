@@ -144,6 +144,7 @@ def run_meta(
         "control_rate": rate,
         "keypoint_map": stream.kmap.name,
         "waist_lift_m": float(stream.lift or 0.0),
+        "rest_fixes": sorted(stream.rest_fixes),
         "scaling": spec.scaling,
         "filter": {
             "cutoff_hz": None if stream.filter is None else stream.filter.cutoff_hz,

@@ -512,6 +512,13 @@ class Retargeter:
                 f"scaling expects ({WAIST_ABOVE_HIPS:g} leg lengths above the hips, as CMU's "
                 "root; docs/motion.md, *The waist key-point*)"
             )
+        if stream.rest_fixes:
+            self._note(
+                "key-points: the skeleton's rest pose is not upright facing +x (BVH: y up, "
+                f"facing +z): its {', '.join(sorted(stream.rest_fixes))} orientations are taken "
+                "from the person's body frame at the first frame, turned as the joints turn "
+                "since (docs/motion.md, *Rest poses*)"
+            )
         cal = self._cal
         legs = [f"{side}_{p}" for side in SIDES for p in ("knee", "ankle")]
         robot_l = sum(cal.robot_lengths.get(k, math.nan) for k in legs)

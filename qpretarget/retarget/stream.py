@@ -29,6 +29,18 @@ WAIST_ABOVE_HIPS_MIN = 0.09
 #: Largest lean of the trunk (waist to neck or head) from the vertical at the first frame for
 #: the waist height to be measured there [deg]: a person lying down is not measured.
 WAIST_LIFT_TILT = 45.0
+#: Largest angle between a joint orientation at the first frame and the body frame its
+#: key-points give there (:data:`REST_FRAMES`) before the orientation is re-referenced [deg]
+#: (:meth:`KeypointStream.rest_fix`). The shared CMU clips read 1-32 deg (waist), 3-13 (torso)
+#: and 6-55 (head: the head's own pitch); a rest pose facing another axis reads 90 or 180.
+REST_POSE_TOLERANCE = {"waist": 45.0, "torso": 45.0, "head": 75.0}
+#: The key-points of each orientation's body frame (:func:`~qpretarget.motion.calibration.triad`:
+#: left and right points across, lower to upper point up).
+REST_FRAMES = {
+    "waist": ("left_hip", "right_hip", "waist", "neck"),
+    "torso": ("left_shoulder", "right_shoulder", "waist", "neck"),
+    "head": ("left_shoulder", "right_shoulder", "neck", "head"),
+}
 
 
 @dataclass(frozen=True)
@@ -91,6 +103,10 @@ class KeypointStream:
         self._waist_joint = kmap.orientations.get("waist")
         if skeleton.orientations is None or self._waist_joint not in self._index:
             self._waist_joint = None
+        #: Orientation -> the constant rotation its joint orientations are right-multiplied
+        #: by (:meth:`rest_fix`; empty until the first frame, and for motions as expected).
+        self.rest_fixes: dict[str, np.ndarray] = {}
+        self._rest_checked = False
 
     # A sample is [positions (3K), rotations (9M)]; the spline also carries K missing flags.
     def values_of(self, positions: Mapping[str, np.ndarray], rotations: Mapping[str, np.ndarray]):
@@ -152,6 +168,70 @@ class KeypointStream:
             return 0.0
         return float(WAIST_ABOVE_HIPS * leg - e)
 
+    def rest_fix(
+        self, points: Mapping[str, np.ndarray], rotations: Mapping[str, np.ndarray]
+    ) -> dict[str, np.ndarray]:
+        r"""Re-referencing of joint orientations whose rest pose is not the expected one.
+
+        A motion's joint orientations are relative to its rest pose (docs/motion.md), and the
+        tasks read them as the body's orientation: the rest pose upright, facing +x (the BVH
+        convention of CMU, Biovision and MVN: facing +Z, y up). A skeleton whose rest pose
+        faces another axis, or whose bones all point along one axis with the pose in the
+        rotations (Maya-style pre-rotations), made the pelvis, torso and head targets point
+        that far off the person's body: a walk with its rest pose facing sideways was walked
+        sideways, legs crossed (ankle error 2.7 leg lengths against 0.08). For each
+        orientation ``o`` with :math:`R_o(0)` at the first frame and :math:`T_o(0)` the body
+        frame its key-points give there (:data:`REST_FRAMES`,
+        :func:`~qpretarget.motion.calibration.triad`), when the angle between them exceeds
+        :data:`REST_POSE_TOLERANCE`, the orientation becomes
+
+        .. math:: R'_o(t) = R_o(t)\, R_o(0)^T T_o(0),
+
+        the person's first-frame body frame turned as the joint turns since; the head's is
+        re-referenced with the torso's too. Returns ``{o: R_o(0)^T T_o(0)}`` of the orientations
+        re-referenced; none when the trunk (waist to neck) leans more than
+        :data:`WAIST_LIFT_TILT` from the vertical at the first frame or a point is missing.
+        """
+        from ..motion.calibration import triad
+
+        out: dict[str, np.ndarray] = {}
+        need = ("waist", "neck")
+        if not all(k in points and np.all(np.isfinite(points[k])) for k in need):
+            return out
+        trunk = np.asarray(points["neck"], float) - np.asarray(points["waist"], float)
+        if trunk[2] < np.linalg.norm(trunk) * np.cos(np.radians(WAIST_LIFT_TILT)):
+            return out
+        for o in ("waist", "torso", "head"):
+            R = rotations.get(o)
+            frame = REST_FRAMES[o]
+            if R is None or not all(k in points for k in frame):
+                continue
+            R = np.asarray(R, float).reshape(3, 3)
+            T = triad(*(np.asarray(points[k], float).reshape(3) for k in frame))
+            if not (np.all(np.isfinite(R)) and np.all(np.isfinite(T))):
+                continue
+            cos = np.clip((np.trace(R.T @ T) - 1.0) / 2.0, -1.0, 1.0)
+            if np.degrees(np.arccos(cos)) > REST_POSE_TOLERANCE[o] or (
+                o == "head" and "torso" in out
+            ):
+                out[o] = R.T @ T
+        return out
+
+    def _fixed(self, rots: dict[str, np.ndarray]) -> None:
+        """Right-multiply ``rots`` (one frame or (T, 3, 3) arrays) by :attr:`rest_fixes`."""
+        for o, C in self.rest_fixes.items():
+            if o in rots:
+                rots[o] = np.asarray(rots[o], float) @ C
+
+    def _check_rest(self, points: Mapping[str, np.ndarray], rots: Mapping[str, np.ndarray]) -> None:
+        """Decide :attr:`rest_fixes` on the first frame (``points``/``rots``: (3,) or (T, 3))."""
+        if self._rest_checked:
+            return
+        self._rest_checked = True
+        first = {k: np.asarray(v, float).reshape(-1, 3)[0] for k, v in points.items()}
+        rot0 = {o: np.asarray(R, float).reshape(-1, 3, 3)[0] for o, R in rots.items()}
+        self.rest_fixes = self.rest_fix(first, rot0)
+
     def _lifted(self, points: dict[str, np.ndarray], waist_rotation: np.ndarray | None) -> None:
         """Raise ``points["waist"]`` (one frame (3,) or frames (T, 3)) by :attr:`lift`."""
         if self.lift is None:
@@ -181,6 +261,8 @@ class KeypointStream:
             waist_R = rotation_of(self._waist_joint)
         self._lifted(pts, waist_R)
         rots = {o: rotation_of(self.kmap.orientations[o]) for o in self.orientations}
+        self._check_rest(pts, rots)
+        self._fixed(rots)
         return pts, rots
 
     # -------------------------------------------------------------------- offline
@@ -221,6 +303,8 @@ class KeypointStream:
             if self.orientations
             else {}
         )
+        self._check_rest(pts, rots)
+        self._fixed(rots)
         x = self.values_of(pts, rots)
         missing = self.missing_of(x)
         if self.filter is not None:
