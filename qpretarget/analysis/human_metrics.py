@@ -29,8 +29,11 @@ gaps is held there by the interpolation), aligned at its first sample (``observe
 
 * *root travel ratio*: horizontal path length of the robot pelvis over the scaled human's, both
   sampled every 0.1 s (pelvis sway at the control rate does not count as travel);
-* *heading error*: :math:`(\psi_r(t) - \psi_r(0)) - (\psi_h(t) - \psi_h(0))`, both unwrapped,
-  in degrees, largest magnitude and final value;
+* *heading error*: :math:`(\psi'_r(t) - \psi'_r(0)) - (\psi_h(t) - \psi_h(0))`, both unwrapped,
+  in degrees, largest magnitude and final value, with :math:`\psi'_r` the robot's heading
+  built as the person's: the forward normal to its pelvis frame's y axis (the line through its
+  hips; the yaw of the x axis differs from it by up to 90 deg on a pelvis tilted as far as a
+  roundhouse kick's);
 * *foot height*: robot, sole frame height above the floor, the lower sole's first-sample
   height (a run may start on one foot); person, the
   lowest of its foot key-points (ankle, toe, heel) above that point type's lowest height in the
@@ -398,7 +401,15 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
 
     # Alignment at the first sample.
     psi_h = np.unwrap(hip_heading(kp["left_hip"], kp["right_hip"]))
+    # The alignment: the yaw of the robot pelvis's x axis at the first sample (the retargeter's
+    # absolute foot placement aligns the same way, FootTargets.set_origin).
     psi_r = np.unwrap(_yaw(rs.pelvis_R[:, :, 0]))
+    # The heading error: the robot's heading from its pelvis frame's y axis (the line through
+    # its hips), as the person's from the hip line, one construction for both. The yaw of the
+    # pelvis's x axis differs from it when the pelvis tilts far: by up to 90 deg under a
+    # roundhouse kick's 45-65 deg hip tilt, with the robot's pelvis on the person's in 3-D
+    # (docs/metrics.md).
+    psi_rh = np.unwrap(hip_heading(rs.pelvis_R[:, :, 1], np.zeros(3)))
     Rz = np.array(
         [
             [math.cos(psi_r[0] - psi_h[0]), -math.sin(psi_r[0] - psi_h[0]), 0.0],
@@ -427,7 +438,7 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
         "ratio": robot_path / human_path if human_path > 1e-9 else None,
         "final_offset_m": float(np.linalg.norm(rs.pelvis[-1, :2] - waist[-1, :2])),
     }
-    dpsi = np.degrees((psi_r - psi_r[0]) - (psi_h - psi_h[0]))
+    dpsi = np.degrees((psi_rh - psi_rh[0]) - (psi_h - psi_h[0]))
     out["heading_error_deg"] = {
         "max": float(np.nanmax(np.abs(dpsi))),
         "final": float(dpsi[-1]),

@@ -34,13 +34,15 @@ def _run(
     lift: float,
     lean_robot: float = 0.0,
     lean_human: float = 0.0,
+    roll: float = 0.0,
 ) -> RobotTrajectory:
     """A synthetic 2 s run: the robot's root walks 1 m along x and turns by ``turn_robot``.
 
     The "person" is the robot's own key-frames (so the leg-length ratio is exactly 1), its root
     turning by ``turn_human``; the robot's left sole rises by ``lift`` between 0.5 and 1.0 s while
     the person's left ankle does not move up. The roots pitch forward by ``lean_robot`` and
-    ``lean_human`` [rad] over the run (about their own y axis), like the turns.
+    ``lean_human`` [rad] over the run (about their own y axis), like the turns, and both roll
+    by ``roll`` [rad] (about their own x axis, after the pitch).
     """
     t = np.arange(0.0, 2.0, 0.01)
     q0 = robot.q_reference.copy()
@@ -59,6 +61,7 @@ def _run(
                 pin.utils.rpyToMatrix(0.0, 0.0, turn * tk / 2.0)
                 @ pin.Quaternion(q0[3:7]).toRotationMatrix()
                 @ pin.utils.rpyToMatrix(0.0, lean * tk / 2.0, 0.0)
+                @ pin.utils.rpyToMatrix(roll * tk / 2.0, 0.0, 0.0)
             )
             qk[3:7] = pin.Quaternion(R).coeffs()
             if who == "robot":
@@ -229,3 +232,19 @@ def test_samples_cut_every_per_sample_array_and_keep_the_person(g1):
     np.testing.assert_array_equal(cut.extra["per_sample"], run.extra["per_sample"][10:50])
     assert cut.extra["scales"].shape == (4,)  # not one per sample: kept whole
     assert cut.human is run.human  # the person keeps its own time base
+
+
+def test_a_pelvis_tilted_far_is_headed_as_the_person_s(g1):
+    """Robot and person turn 0.5 rad, pitch forward 0.9 rad and roll 1.1 rad alike (a pelvis
+    as far tilted as a roundhouse kick's): the heading error is zero, both headings being the
+    forward normal to the hip line (1e-6 deg: round-off). The yaw of the robot pelvis's x axis,
+    the former construction, reads 56.5 deg off here (asserted above 20 deg, so that the
+    construction matters on this case)."""
+    run = _run(g1, turn_robot=0.5, turn_human=0.5, lift=0.0, lean_robot=0.9, lean_human=0.9,
+               roll=1.1)  # fmt: skip
+    m = human_metrics(run, g1)
+    assert m["heading_error_deg"]["max"] < 1e-6
+    R = np.array([pin.Quaternion(*qk[[6, 3, 4, 5]]).matrix() for qk in run.q])
+    x_yaw = np.unwrap(np.arctan2(R[:, 1, 0], R[:, 0, 0]))
+    y_normal = np.unwrap(np.arctan2(-R[:, 0, 1], R[:, 1, 1]))
+    assert np.degrees(np.max(np.abs((x_yaw - x_yaw[0]) - (y_normal - y_normal[0])))) > 20.0
