@@ -23,7 +23,7 @@ from .spec import RetargetSpec
 #: first frame of the 14 shared CMU clips, median 0.12; SMPL's pelvis joint sits about as high).
 WAIST_ABOVE_HIPS = 0.12
 #: A waist key-point lower than this above the hip joints' midpoint at the first frame (in leg
-#: lengths) is a skeleton rooted at the hip joints (Biovision / MotionBuilder and LAFAN1 about 0,
+#: lengths) is a skeleton rooted at the hip joints (Biovision / MotionBuilder and DeepMimic 0,
 #: Mixamo 0.08): it is raised to :data:`WAIST_ABOVE_HIPS` (:meth:`KeypointStream.waist_lift`).
 WAIST_ABOVE_HIPS_MIN = 0.09
 #: Largest lean of the trunk (waist to neck or head) from the vertical at the first frame for
@@ -127,7 +127,7 @@ class KeypointStream:
         is as high above its ankles as the person's waist key-point above theirs, times the
         leg-length ratio. Skeletons put their root at different heights: CMU's root is the
         pelvis centre, :data:`WAIST_ABOVE_HIPS` leg lengths above the hip joints' midpoint
-        :math:`m`; Biovision's and LAFAN1's ``Hips`` sit at the hip joints. With those the
+        :math:`m`; Biovision's and DeepMimic's roots sit at the hip joints. With those the
         pelvis target was 8-9 cm lower on G1 and the robot crouched (knees at 1.5 rad on a
         Biovision clip of a person standing still). With :math:`e = (w - m) \cdot \hat z` at
         the first frame and :math:`\ell` the leg length (mean of both legs' hip-knee and

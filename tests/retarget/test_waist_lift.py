@@ -4,7 +4,7 @@
 Poubel 2014 eq. 1 roots the scaled body at the feet, so the robot's pelvis target is as high
 above its ankles as the person's waist key-point is above theirs (times the leg-length ratio).
 CMU's root is the pelvis centre, 0.110-0.128 leg lengths above the hip joints' midpoint on the
-shared clips; Biovision's and LAFAN1's ``Hips`` sit at the hip joints, and the robot crouched
+shared clips; Biovision's and DeepMimic's roots sit at the hip joints, and the robot crouched
 (G1's knees at 1.5 rad on a real Biovision clip of a person standing still). See
 ``KeypointStream.waist_lift`` and docs/motion.md (*The waist key-point*).
 """
@@ -52,7 +52,7 @@ def _stream(controller: Controller, kmap="cmu"):
 def test_the_lift_is_what_takes_the_waist_to_the_pelvis_centre(controller) -> None:
     stream = _stream(controller)
     leg = 0.82
-    # Rooted at the hip joints (Biovision, LAFAN1): raised to 0.12 leg lengths, to 1e-12 m
+    # Rooted at the hip joints (Biovision, DeepMimic): raised to 0.12 leg lengths, to 1e-12 m
     # (sums of a few distances).
     assert stream.waist_lift(_person(0.0), None) == pytest.approx(WAIST_ABOVE_HIPS * leg, abs=1e-12)
     assert stream.waist_lift(_person(-0.01), None) == pytest.approx(
@@ -82,7 +82,7 @@ def test_a_waist_at_the_hip_joints_gives_the_cmu_root_s_pelvis(controller) -> No
     """The walk with its waist key-point put at the hip joints' midpoint, against CMU's root.
 
     The same real clip with ``waist: [lfemur, rfemur]`` (the mean of the hip joints, where a
-    Biovision or LAFAN1 skeleton has its root): raised by 0.12 leg lengths, the run's first
+    Biovision or DeepMimic skeleton has its root): raised by 0.12 leg lengths, the run's first
     pelvis height is the CMU map's within 1 cm (CMU's root on this clip is 0.119 leg lengths
     up and 1-2 cm off the mid-hip horizontally; measured 0.7 cm), and over the first second
     (steps on both feet) within 2.5 cm (measured 1.6 cm). Without the lift the first pelvis
