@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..control.controller import StepResult
+from ..motion.calibration import triad
 from ..motion.filters import Butterworth, CardinalSpline
 from ..motion.human_motion import HumanMotion
 from ..motion.keypoints import KeypointMap
@@ -192,8 +193,6 @@ class KeypointStream:
         re-referenced; none when the trunk (waist to neck) leans more than
         :data:`WAIST_LIFT_TILT` from the vertical at the first frame or a point is missing.
         """
-        from ..motion.calibration import triad
-
         out: dict[str, np.ndarray] = {}
         need = ("waist", "neck")
         if not all(k in points and np.all(np.isfinite(points[k])) for k in need):
