@@ -142,17 +142,12 @@ class KeypointStream:
         by :math:`\lambda R(t) R(0)^T \hat z` (:math:`R` the waist joint's orientation: the
         lift turns with the pelvis), or :math:`\lambda \hat z` without orientations.
         """
-        self._lift_R0 = None if waist_rotation is None else np.asarray(waist_rotation, float)
         need = ("waist", "left_hip", "right_hip", "left_knee", "right_knee", "left_ankle",
                 "right_ankle")  # fmt: skip
         p = {k: np.asarray(points[k], float).reshape(3) for k in need if k in points}
         top = next((points[k] for k in ("neck", "head") if k in points), None)
-        if (
-            len(p) < len(need)
-            or top is None
-            or self._lift_R0 is not None
-            and not np.all(np.isfinite(self._lift_R0))
-        ):
+        unknown = waist_rotation is not None and not np.all(np.isfinite(waist_rotation))
+        if len(p) < len(need) or top is None or unknown:
             return 0.0
         trunk = np.asarray(top, float).reshape(3) - p["waist"]
         if not (np.all(np.isfinite(trunk)) and all(np.all(np.isfinite(v)) for v in p.values())):
@@ -236,6 +231,7 @@ class KeypointStream:
         if self.lift is None:
             first = {k: np.asarray(v, float).reshape(-1, 3)[0] for k, v in points.items()}
             r0 = None if waist_rotation is None else np.asarray(waist_rotation).reshape(-1, 3, 3)[0]
+            self._lift_R0 = None if r0 is None else np.asarray(r0, float)
             self.lift = self.waist_lift(first, r0)
         if not self.lift or "waist" not in points:
             return
