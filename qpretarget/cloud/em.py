@@ -632,6 +632,7 @@ PLANT_SOLE_WEIGHT = 100.0
 #: Iterations of that compromise (projected Levenberg-Marquardt).
 PLANT_LM_ITERATIONS = 20
 
+
 # ------------------------------------------------------------------------------ the fitter
 class CloudRetargeter:
     """Fit the HUMROB template to a sequence of clouds; the joint angles drive the robot.

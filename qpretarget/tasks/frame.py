@@ -37,8 +37,6 @@ def orientation_error(R: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
     return 0.5 * np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])
 
 
-
-
 def _is_rotation(R: np.ndarray) -> bool:
     r"""``R'R = I`` and ``det R = 1`` to 1e-3 (cheap enough for every tick).
 
