@@ -71,9 +71,7 @@ def test_the_leg_puts_the_sole_down_under_the_fitted_trunk(g1):
     rigid = _retargeter(g1, "rigid").robot_configuration(q_fit, support)
     assert np.abs(pin.log6(_sole(g1, rigid, "left_foot").inverse() * target).vector).max() < 1e-9
     assert np.array_equal(rigid[7:], q_fit[7:])
-    turn = pin.log3(
-        pin.XYZQUATToSE3(q_fit[:7]).rotation.T @ pin.XYZQUATToSE3(rigid[:7]).rotation
-    )
+    turn = pin.log3(pin.XYZQUATToSE3(q_fit[:7]).rotation.T @ pin.XYZQUATToSE3(rigid[:7]).rotation)
     assert np.degrees(np.linalg.norm(turn)) > 2.0
 
 

@@ -79,7 +79,9 @@ def test_base_limits_bound_the_floating_base_too(g1, make_config, make_wild_targ
     1.0: the limits)."""
     a_lin, a_ang = 20.0, 100.0
     cfg = make_config(g1, a_max=None)
-    cfg["constraints"].append({"type": "acceleration_limits", "a_max": 100.0, "base": [a_lin, a_ang]})
+    cfg["constraints"].append(
+        {"type": "acceleration_limits", "a_max": 100.0, "base": [a_lin, a_ang]}
+    )
     ctrl = Controller(cfg)
     lo, hi = ctrl.constraint("acceleration_limits").compute_bounds(ctrl.state, ctrl.dt)
     assert hi[:3] == pytest.approx([a_lin * ctrl.dt] * 3) and hi[3:6] == pytest.approx([1.0] * 3)
