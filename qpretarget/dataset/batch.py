@@ -36,7 +36,7 @@ from ..fileio import write_atomic
 SUMMARY_COLUMNS = (
     "clip", "status", "frames", "duration_s", "output_frames", "joint_limit_violations",
     "penetrating_frames", "min_pair_distance_mm", "relaxed_ticks", "held_ticks", "wall_time_s",
-    "outputs", "error",
+    "outputs", "notes", "error",
 )  # fmt: skip
 
 
@@ -82,6 +82,9 @@ class ClipResult:
     held_ticks: int = 0
     wall_time_s: float = 0.0
     outputs: list[str] = field(default_factory=list)
+    #: The run's notes on its input, " | "-joined: frames dropped on loading, a corrected
+    #: skeleton (waist lift, rest pose), a start in the air, a person lying down.
+    notes: str = ""
     error: str = ""
     rmse_mm: dict[str, float] = field(default_factory=dict)
     physics: dict[str, Any] = field(default_factory=dict)
@@ -231,7 +234,8 @@ def _retarget_and_export(job: ClipJob) -> ClipResult:
     controller = _controller(job.config)
     controller.reset()
     motion = load_motion(job.clip)
-    run = Retargeter(controller).retarget(motion, progress=False)
+    retargeter = Retargeter(controller)
+    run = retargeter.retarget(motion, progress=False)
     run.meta["config_name"] = Path(job.config).name
     run.meta["config_sha256"] = job.config_sha256
     run.meta["source_clip"] = job.clip
@@ -250,6 +254,7 @@ def _retarget_and_export(job: ClipJob) -> ClipResult:
         relaxed_ticks=int(np.count_nonzero(status == "relaxed")),
         held_ticks=int(np.count_nonzero(status == "held")),
         outputs=[str(f) for f in files],
+        notes=" | ".join([*run.meta.get("motion_notes", []), *retargeter.notes]),
         rmse_mm={k: float(v) for k, v in summary.get("rmse_mm", {}).items()},
     )
     if job.audit:
@@ -362,8 +367,8 @@ def summary_rows(results: Iterable[ClipResult]) -> tuple[list[str], list[dict[st
     results = list(results)
     tasks = sorted({k for r in results for k in r.rmse_mm})
     phys = [k for k in dict.fromkeys(k for r in results for k in r.physics)]
-    cols = list(SUMMARY_COLUMNS[:-2]) + [f"rmse_mm/{t}" for t in tasks]
-    cols += [f"physics/{k}" for k in phys] + ["outputs", "error"]
+    cols = list(SUMMARY_COLUMNS[:-3]) + [f"rmse_mm/{t}" for t in tasks]
+    cols += [f"physics/{k}" for k in phys] + ["outputs", "notes", "error"]
     rows = []
     for r in results:
         d = asdict(r)
@@ -412,4 +417,6 @@ def format_table(results: Sequence[ClipResult]) -> str:
             lines[-1] += f" {ph:>16s}"
         if r.error:
             lines.append(f"    error: {r.error}")
+        for note in filter(None, r.notes.split(" | ")):
+            lines.append(f"    note: {note[:160]}")
     return "\n".join(lines)

@@ -38,6 +38,8 @@ def test_folder_with_a_corrupt_clip(tmp_path, clip_dir, repo_dir):
                       "broken.bvh": "failed"}  # fmt: skip
     broken = next(row for row in rows if row["clip"].endswith("broken.bvh"))
     assert broken["error"] and "broken.bvh" in broken["error"]
+    # CMU skeletons need no correction: their rows carry no note (docs/datasets.md).
+    assert all(row["notes"] == "" for row in rows)
     for stem in ("teapot", "walk_stop", "boxing"):
         for suffix in (".csv", ".json", ".pkl", ".npz", ".manifest.json"):
             assert (out / f"{stem}{suffix}").is_file()
@@ -77,3 +79,19 @@ def test_output_path_that_is_a_file_is_one_clear_line(tmp_path, clip_dir, repo_d
                 str(target)], repo_dir)  # fmt: skip
     assert r.returncode != 0 and "Traceback" not in r.stderr
     assert "is a file" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_a_corrected_skeleton_is_noted_in_the_summary(tmp_path, repo_dir):
+    """A clip whose skeleton was corrected (here: the waist key-point at the hip joints,
+    raised) says so in its summary row's ``notes`` (csv and json) and under the table; a
+    clip without notes has an empty cell (the shared CMU clips: test above)."""
+    from qpretarget.dataset.batch import ClipResult, format_table, summary_rows
+
+    rows = [
+        ClipResult("a.bvh", "ok", notes="key-points: the skeleton's waist ... raised by 10.0 cm"),
+        ClipResult("b.bvh", "ok"),
+    ]
+    cols, table = summary_rows(rows)
+    assert cols[-3:] == ["outputs", "notes", "error"]
+    assert "raised by" in table[0]["notes"] and table[1]["notes"] == ""
+    assert "    note: key-points" in format_table(rows)
