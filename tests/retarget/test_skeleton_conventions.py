@@ -1,5 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The waist key-point of a skeleton rooted at its hip joints is raised to the pelvis centre.
+"""Skeleton conventions the key-point stream corrects at the first frame.
+
+A waist key-point at the hip joints is raised to the pelvis centre, and a rest pose that does
+not stand upright facing forward is re-referenced (docs/motion.md, *Rest poses*).
 
 Poubel 2014 eq. 1 roots the scaled body at the feet, so the robot's pelvis target is as high
 above its ankles as the person's waist key-point is above theirs (times the leg-length ratio).
