@@ -36,8 +36,8 @@ def test_the_human_is_shown_at_the_robot_sample_s_time() -> None:
     """The human tracks are at the capture rate, the run at the control rate.
 
     Until stop 37 the human sample of the robot's index was drawn: a 30 Hz clip run at 100 Hz
-    showed the person 3.3 times too slowly (the last frame from a third of the run on), a 120 Hz
-    one 1.2 times too fast.
+    played the person 3.3 times too fast (its last frame from a third of the run on), a 120 Hz
+    one at 0.83 of its speed (its last sixth never shown).
     """
     import numpy as np
 
