@@ -20,6 +20,38 @@ def test_known_skeleton_prints_its_map():
     r = _cli(str(MOCAP / "cmu_16_15_walk.bvh"))
     assert r.returncode == 0, r.stderr
     assert "key-point map: cmu" in r.stdout and "left_elbow       <- lradius" in r.stdout
+    assert "skeleton: waist and rest pose as the retargeter expects" in r.stdout
+
+
+def test_the_corrections_a_skeleton_will_get_are_shown():
+    """The same real walk with its waist at the hip joints and its rest pose turned 90 deg
+    about the vertical: both corrections are named, with the lift and the angles the
+    retargeter will use (the lift 0.12 leg lengths: 10.0 cm on this person, to 0.5 cm; the
+    angles 90 deg to 20 deg: on this clip CMU's waist and torso frames are 2-3 deg off the
+    key-points' body frames, the head's 17 deg, its own pitch; measured 90, 92, 100)."""
+    from dataclasses import replace
+
+    import numpy as np
+    import pinocchio as pin
+
+    from qpretarget.commands.keypoints import conventions
+    from qpretarget.motion import load_motion
+    from qpretarget.motion.keypoints import load_keypoint_map
+
+    motion = load_motion(MOCAP / "cmu_16_15_walk.bvh").slice(0.0, 0.5)
+    cmu = load_keypoint_map("cmu")
+    data = {"keypoints": {k: list(s.points) if len(s.points) > 1 else s.points[0]
+                          for k, s in cmu.keypoints.items()},
+            "orientations": dict(cmu.orientations), "name": "cmu_hips"}  # fmt: skip
+    data["keypoints"]["waist"] = ["lfemur", "rfemur"]
+    kmap = load_keypoint_map(data)
+    assert conventions(motion, cmu) == ["skeleton: waist and rest pose as the retargeter expects"]
+    Q = pin.exp3(np.radians(90.0) * np.array([0.0, 0.0, 1.0]))
+    lines = conventions(replace(motion, orientations=motion.orientations @ Q.T), kmap)
+    lift = float(re.search(r"raised by ([0-9.]+) cm", lines[0]).group(1))
+    assert abs(lift - 10.0) < 0.5, lines
+    angles = [float(a) for a in re.findall(r"(\d+) deg", lines[1])]
+    assert len(angles) == 3 and all(abs(a - 90.0) < 20.0 for a in angles), lines
 
 
 def test_unknown_skeleton_gets_a_template_that_loads_and_retargets(tmp_path, repo_dir):

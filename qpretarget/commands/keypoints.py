@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from . import add_command, add_motion
 
@@ -19,10 +19,11 @@ HELP = """examples:
   qpretarget keypoints my_capture.bvh --template > my_skeleton.yaml
 
 Prints the joint (or marker) names of the file and the bundled key-point map picked for them
-(cmu, cgspeed, lafan1, mixamo, mvn_bvh, biovision, ...), key-point by key-point. When no
-bundled map fits, prints the closest one, the names it misses, and a map template to fill in
-(docs/motion.md); pass the filled file with `qpretarget retarget ... --keypoint-map
-my_skeleton.yaml`.
+(cmu, cgspeed, lafan1, mixamo, mvn_bvh, biovision, ...), key-point by key-point, and what the
+retargeter will correct in the skeleton (a waist at the hip joints, a rest pose that does not
+face forward; docs/motion.md). When no bundled map fits, prints the closest one, the names
+it misses, and a map template to fill in (docs/motion.md); pass the filled file with
+`qpretarget retarget ... --keypoint-map my_skeleton.yaml`.
 """
 
 
@@ -86,6 +87,49 @@ def best_suggestion(names: list[str]) -> tuple[str, dict[str, str]]:
     return max(scored, key=lambda ms: len(ms[1]))
 
 
+def conventions(motion: Any, kmap: KeypointMap) -> list[str]:
+    """What the retargeter will correct in this skeleton, read on its first frame.
+
+    The waist lift of a root at the hip joints and the re-referencing of a rest pose that does
+    not stand upright facing +x (``KeypointStream.waist_lift`` / ``rest_fix``, the same
+    functions the retargeter calls; docs/motion.md, *The waist key-point* and *Rest poses*).
+    """
+    import numpy as np
+
+    from ..retarget.stream import KeypointStream
+
+    try:
+        pts = {k: np.asarray(v, float)[0] for k, v in kmap.positions(motion).items()}
+        rots = (
+            {o: motion.joint_orientation(j)[0] for o, j in kmap.orientations.items()}
+            if motion.orientations is not None
+            else {}
+        )
+    except (KeyError, ValueError, IndexError):
+        return []
+    lift = KeypointStream.waist_lift(pts, rots.get("waist"))
+    if lift:
+        pts["waist"] = pts["waist"] + np.array([0.0, 0.0, lift])
+    fixes = KeypointStream.rest_fix(pts, rots)
+    out = []
+    if lift:
+        out.append(
+            f"skeleton: the waist is rooted at (or near) the hip joints: raised by "
+            f"{100 * lift:.1f} cm when retargeted (docs/motion.md, The waist key-point)"
+        )
+    if fixes:
+        angles = {
+            o: float(np.degrees(np.arccos(np.clip((np.trace(C) - 1.0) / 2.0, -1.0, 1.0))))
+            for o, C in fixes.items()
+        }
+        listed = ", ".join(f"{o} {a:.0f} deg" for o, a in sorted(angles.items()))
+        out.append(
+            f"skeleton: the rest pose is not upright facing +x ({listed} off the body frames): "
+            "re-referenced when retargeted (docs/motion.md, Rest poses)"
+        )
+    return out or ["skeleton: waist and rest pose as the retargeter expects"]
+
+
 def run(args: argparse.Namespace) -> int:
     """Print the joints and the guessed map (or a template to fill); 0 if a bundled map fits."""
     from ..motion import load_motion
@@ -107,6 +151,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"key-point map: {kmap.name} ({' '.join(kmap.description.split())})")
         for kp, src in guess.items():
             print(f"  {kp:16s} <- {src}")
+        for line in conventions(motion, kmap):
+            print(line)
         return 0
     like, guess = best_suggestion(names)
     if args.template:

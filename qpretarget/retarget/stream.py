@@ -119,9 +119,8 @@ class KeypointStream:
         pos = values[..., : 3 * self.K].reshape(values.shape[:-1] + (self.K, 3))
         return np.any(np.isnan(pos), axis=-1).astype(float)
 
-    def waist_lift(
-        self, points: Mapping[str, np.ndarray], waist_rotation: np.ndarray | None
-    ) -> float:
+    @staticmethod
+    def waist_lift(points: Mapping[str, np.ndarray], waist_rotation: np.ndarray | None) -> float:
         r"""How far to raise the waist key-point, from the first frame ``points`` [m].
 
         The scaling roots the body at the feet (Poubel 2014 eq. 1): the robot's pelvis target
@@ -164,8 +163,9 @@ class KeypointStream:
             return 0.0
         return float(WAIST_ABOVE_HIPS * leg - e)
 
+    @staticmethod
     def rest_fix(
-        self, points: Mapping[str, np.ndarray], rotations: Mapping[str, np.ndarray]
+        points: Mapping[str, np.ndarray], rotations: Mapping[str, np.ndarray]
     ) -> dict[str, np.ndarray]:
         r"""Re-referencing of joint orientations whose rest pose is not the expected one.
 
