@@ -42,3 +42,34 @@ def mocap_dir(shared_dir: Path) -> Path:
 @pytest.fixture(scope="session")
 def configs_dir() -> Path:
     return CONFIGS
+
+
+@pytest.fixture
+def waist_at_hips_map() -> dict:
+    """The bundled CMU map with its waist key-point at the hip joints' midpoint (``lfemur``,
+    ``rfemur``), where a Biovision or DeepMimic skeleton has its root: the same real clip with
+    that one convention changed (docs/motion.md, *The waist key-point*)."""
+    from qpretarget.motion.keypoints import load_keypoint_map
+
+    cmu = load_keypoint_map("cmu")
+    keypoints: dict = {k: list(s.points) if len(s.points) > 1 else s.points[0]
+                       for k, s in cmu.keypoints.items()}  # fmt: skip
+    keypoints["waist"] = ["lfemur", "rfemur"]
+    return {"name": "cmu_hips", "keypoints": keypoints, "orientations": dict(cmu.orientations)}
+
+
+def _push_all(retargeter, motion) -> list:
+    """``Retargeter.push`` every frame of ``motion`` at its capture rate, then ``finish``."""
+    retargeter.start(motion)
+    commands = []
+    for k in range(len(motion)):
+        commands += retargeter.push(
+            motion.positions[k], motion.t[k], orientations=motion.orientations[k]
+        )
+    return commands + retargeter.finish()
+
+
+@pytest.fixture
+def push_all():
+    """``push_all(retargeter, motion)``: the commands of the motion pushed frame by frame."""
+    return _push_all

@@ -23,7 +23,7 @@ def test_known_skeleton_prints_its_map():
     assert "skeleton: waist and rest pose as the retargeter expects" in r.stdout
 
 
-def test_the_corrections_a_skeleton_will_get_are_shown():
+def test_the_corrections_a_skeleton_will_get_are_shown(waist_at_hips_map):
     """The same real walk with its waist at the hip joints and its rest pose turned 90 deg
     about the vertical: both corrections are named, with the lift and the angles the
     retargeter will use (the lift 0.12 leg lengths: 10.0 cm on this person, to 0.5 cm; the
@@ -40,11 +40,7 @@ def test_the_corrections_a_skeleton_will_get_are_shown():
 
     motion = load_motion(MOCAP / "cmu_16_15_walk.bvh").slice(0.0, 0.5)
     cmu = load_keypoint_map("cmu")
-    data = {"keypoints": {k: list(s.points) if len(s.points) > 1 else s.points[0]
-                          for k, s in cmu.keypoints.items()},
-            "orientations": dict(cmu.orientations), "name": "cmu_hips"}  # fmt: skip
-    data["keypoints"]["waist"] = ["lfemur", "rfemur"]
-    kmap = load_keypoint_map(data)
+    kmap = load_keypoint_map(waist_at_hips_map)
     assert conventions(motion, cmu) == ["skeleton: waist and rest pose as the retargeter expects"]
     Q = pin.exp3(np.radians(90.0) * np.array([0.0, 0.0, 1.0]))
     lines = conventions(replace(motion, orientations=motion.orientations @ Q.T), kmap)

@@ -177,16 +177,12 @@ def test_stepping_clip_end_to_end(whole_body):
     assert x[1] - x[0] > 0.05
 
 
-def test_online_push_matches_offline_causal(whole_body):
+def test_online_push_matches_offline_causal(whole_body, push_all):
     """Frames pushed one by one at the capture rate give the offline causal run's commands."""
     motion = _clip("cmu_16_33_walk_stop.bvh", 0.6, 1.6)
     rt = Retargeter(whole_body)
     offline = rt.retarget(motion, causal=True)
-    rt.start(motion)
-    commands = []
-    for k in range(len(motion)):
-        commands += rt.push(motion.positions[k], motion.t[k], orientations=motion.orientations[k])
-    commands += rt.finish()
+    commands = push_all(rt, motion)
     q = np.array([c.q for c in commands])
     t = np.array([c.t for c in commands])
     assert np.allclose(np.diff(t), 0.01, atol=1e-9)  # 100 Hz commands

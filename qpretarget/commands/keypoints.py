@@ -96,7 +96,7 @@ def conventions(motion: Any, kmap: KeypointMap) -> list[str]:
     """
     import numpy as np
 
-    from ..retarget.stream import KeypointStream
+    from ..retarget.stream import KeypointStream, rotation_angle
 
     try:
         pts = {k: np.asarray(v, float)[0] for k, v in kmap.positions(motion).items()}
@@ -118,10 +118,7 @@ def conventions(motion: Any, kmap: KeypointMap) -> list[str]:
             f"{100 * lift:.1f} cm when retargeted (docs/motion.md, The waist key-point)"
         )
     if fixes:
-        angles = {
-            o: float(np.degrees(np.arccos(np.clip((np.trace(C) - 1.0) / 2.0, -1.0, 1.0))))
-            for o, C in fixes.items()
-        }
+        angles = {o: float(np.degrees(rotation_angle(C))) for o, C in fixes.items()}
         listed = ", ".join(f"{o} {a:.0f} deg" for o, a in sorted(angles.items()))
         out.append(
             f"skeleton: the rest pose is not upright facing +x ({listed} off the body frames): "

@@ -11,6 +11,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 
 from ..control.controller import StepResult
 from ..motion.calibration import triad
@@ -42,6 +43,11 @@ REST_FRAMES = {
     "torso": ("left_shoulder", "right_shoulder", "waist", "neck"),
     "head": ("left_shoulder", "right_shoulder", "neck", "head"),
 }
+
+
+def rotation_angle(R: np.ndarray) -> float:
+    """Angle of the rotation ``R`` [rad]: the norm of its log (``pin.log3``)."""
+    return float(np.linalg.norm(pin.log3(np.asarray(R, float))))
 
 
 @dataclass(frozen=True)
@@ -204,8 +210,7 @@ class KeypointStream:
             T = triad(*(np.asarray(points[k], float).reshape(3) for k in frame))
             if not (np.all(np.isfinite(R)) and np.all(np.isfinite(T))):
                 continue
-            cos = np.clip((np.trace(R.T @ T) - 1.0) / 2.0, -1.0, 1.0)
-            if np.degrees(np.arccos(cos)) > REST_POSE_TOLERANCE[o] or (
+            if np.degrees(rotation_angle(R.T @ T)) > REST_POSE_TOLERANCE[o] or (
                 o == "head" and "torso" in out
             ):
                 out[o] = R.T @ T

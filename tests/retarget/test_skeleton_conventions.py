@@ -21,7 +21,7 @@ import pytest
 
 from qpretarget import Controller
 from qpretarget.motion import load_motion
-from qpretarget.motion.keypoints import guess_keypoint_map, load_keypoint_map
+from qpretarget.motion.keypoints import guess_keypoint_map
 from qpretarget.retarget import Retargeter
 from qpretarget.retarget.stream import WAIST_ABOVE_HIPS
 
@@ -81,7 +81,9 @@ def test_the_shared_cmu_clips_are_not_lifted(controller) -> None:
         assert stream.lift == 0.0, clip.name
 
 
-def test_a_waist_at_the_hip_joints_gives_the_cmu_root_s_pelvis(controller) -> None:
+def test_a_waist_at_the_hip_joints_gives_the_cmu_root_s_pelvis(
+    controller, waist_at_hips_map
+) -> None:
     """The walk with its waist key-point put at the hip joints' midpoint, against CMU's root.
 
     The same real clip with ``waist: [lfemur, rfemur]`` (the mean of the hip joints, where a
@@ -91,11 +93,7 @@ def test_a_waist_at_the_hip_joints_gives_the_cmu_root_s_pelvis(controller) -> No
     (steps on both feet) within 2.5 cm (measured 1.6 cm). Without the lift the first pelvis
     height was 7 cm lower, with the knees bent further.
     """
-    cmu = load_keypoint_map("cmu")
-    data = {"keypoints": {k: list(s.points) if len(s.points) > 1 else s.points[0]
-                          for k, s in cmu.keypoints.items()},
-            "orientations": dict(cmu.orientations), "name": "cmu_hips"}  # fmt: skip
-    data["keypoints"]["waist"] = ["lfemur", "rfemur"]
+    data = waist_at_hips_map
     motion = load_motion(WALK).slice(0.0, 1.0)
     base = Retargeter(controller).retarget(motion)
     hips = Retargeter(controller, keypoint_map=data).retarget(motion)
@@ -293,7 +291,9 @@ def test_a_rest_pose_facing_another_axis_gives_the_same_run(controller, axis, de
     assert np.max(np.abs(np.degrees(yaw[1] - yaw[0]))) < 5.0
 
 
-def test_online_push_lifts_and_re_references_as_offline(controller) -> None:
+def test_online_push_lifts_and_re_references_as_offline(
+    controller, waist_at_hips_map, push_all
+) -> None:
     """Frames pushed one by one (a live suit) get the lift and the rest-pose re-referencing
     decided on the first pushed frame, as the offline causal run does: the walk's first 1.5 s
     with its waist at the hip joints and its rest pose turned 90 deg about the vertical, online
@@ -301,22 +301,13 @@ def test_online_push_lifts_and_re_references_as_offline(controller) -> None:
     the batch one to ~1e-12)."""
     import pinocchio as pin
 
-    cmu = load_keypoint_map("cmu")
-    data = {"keypoints": {k: list(s.points) if len(s.points) > 1 else s.points[0]
-                          for k, s in cmu.keypoints.items()},
-            "orientations": dict(cmu.orientations), "name": "cmu_hips"}  # fmt: skip
-    data["keypoints"]["waist"] = ["lfemur", "rfemur"]
+    data = waist_at_hips_map
     Q = pin.exp3(np.radians(90.0) * np.array([0.0, 0.0, 1.0]))
     motion = _rest_turned(load_motion(WALK).slice(0.0, 1.5), Q)
     rt = Retargeter(controller, keypoint_map=data)
     offline = rt.retarget(motion, causal=True)
     assert offline.meta["waist_lift_m"] > 0.09 and offline.meta["rest_fixes"]
-    rt.start(motion)
-    commands = []
-    for k in range(len(motion)):
-        commands += rt.push(motion.positions[k], motion.t[k], orientations=motion.orientations[k])
-    commands += rt.finish()
-    q = np.array([c.q for c in commands])
+    q = np.array([c.q for c in push_all(rt, motion)])
     assert q.shape == offline.q.shape
     assert np.abs(q - offline.q).max() < 1e-6
     assert any("raised by" in n for n in rt.notes) and any("rest pose" in n for n in rt.notes)

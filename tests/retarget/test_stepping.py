@@ -1319,7 +1319,9 @@ def test_rising_on_the_toes_to_reach_up_rolls_the_soles_with_their_contacts():
         ("cmu_131_04_dance_spin.bvh", 2.0, 3.2),
     ],
 )
-def test_online_push_equals_offline_causal_with_contacts_switching(clip, start, end, monkeypatch):
+def test_online_push_equals_offline_causal_with_contacts_switching(
+    clip, start, end, monkeypatch, push_all
+):
     from qpretarget.retarget.rooting import Rooting
 
     drifts: list[float] = []
@@ -1350,11 +1352,7 @@ def test_online_push_equals_offline_causal_with_contacts_switching(clip, start, 
         assert any(st == "stance/stance" and ph == "left" for st, ph in pairs)
     if "kicks" in clip:  # a foot lifted while the person stands still on both (settle step)
         assert any(states[k] in ("swing/stance", "stance/swing") for k in both)
-    rt.start(motion)
-    commands = []
-    for k in range(len(motion)):
-        commands += rt.push(motion.positions[k], motion.t[k], orientations=motion.orientations[k])
-    commands += rt.finish()
+    commands = push_all(rt, motion)
     q = np.array([c.q for c in commands])
     assert q.shape == offline.q.shape
     # Same code after the streaming filter (equal to the batch one to ~1e-12): 1e-6 is the
