@@ -484,11 +484,18 @@ class FootTargets:
             xy = self.leg_scale * np.array(found) if found else None
             ok = yaw is not None and measured and xy is not None and bool(np.all(np.isfinite(xy)))
             human_foot[s] = (yaw, xy) if ok and yaw is not None and xy is not None else None
-            if yaw is not None and s in cal.human_foot_yaw:
-                dpsi = yaw - cal.human_foot_yaw[s]
+            if s in cal.human_foot_yaw and (yaw is not None or s in self.toe_length):
                 base = waist_dyaw()
-                off = math.atan2(math.sin(dpsi - base), math.cos(dpsi - base))
-                off = max(-FOOT_YAW_RANGE, min(FOOT_YAW_RANGE, off))
+                if yaw is None:
+                    # Never measured (the foot has pointed down since the first sample: a
+                    # fighting stance on the balls of the feet): its ankle -> toe yaw is
+                    # noise (DeepMimic's punch: 113 deg from the waist's turn, turning the
+                    # other way), so the sole turns with the waist.
+                    off = 0.0
+                else:
+                    dpsi = yaw - cal.human_foot_yaw[s]
+                    off = math.atan2(math.sin(dpsi - base), math.cos(dpsi - base))
+                    off = max(-FOOT_YAW_RANGE, min(FOOT_YAW_RANGE, off))
                 dpsi = base + off
                 last = self._yaw_target.get(s)
                 if last is not None and flight and self._waist_last is not None:

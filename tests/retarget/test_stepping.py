@@ -516,6 +516,50 @@ def test_in_flight_a_sole_yaw_target_turns_with_the_waist_and_slowly_against_it(
     assert after - before == pytest.approx(FOOT_YAW_RATE * dt, abs=1e-9)
 
 
+def test_a_foot_pointing_down_since_the_first_sample_turns_with_the_waist():
+    """A foot whose yaw was never measured (its ankle -> toe vector under 80 % horizontal since
+    the first sample: a fighting stance on the balls of the feet) gets the waist's turn as its
+    yaw target, not the raw ankle -> toe yaw, which is noise there. On DeepMimic's punch the
+    raw yaw turned the rear foot's target 113 deg the other way from the waist's turn, and the
+    twisted leg held the pelvis 74 deg behind the person's heading (5 deg with the waist's)."""
+    from types import SimpleNamespace
+
+    from qpretarget.retarget.feet import FootTargets
+    from qpretarget.retarget.support import rot_z
+
+    def raw_sole(side, scaled, kp, cal, current, waist_dyaw):  # noqa: ANN001, ANN202
+        if f"{side}_toe" not in kp:
+            return pin.SE3.Identity()
+        d = kp[f"{side}_toe"] - kp[f"{side}_ankle"]  # FootSupport.swing_sole's raw yaw
+        return pin.SE3(rot_z(math.atan2(d[1], d[0])), np.zeros(3))
+
+    feet = SimpleNamespace(sole_ref={"left": pin.SE3.Identity()}, swing_sole=raw_sole)
+    cal = SimpleNamespace(human_foot_yaw={"left": 0.0})
+    ft = FootTargets(feet, cal, 1.0, {}, 0.92, dt=0.01)  # type: ignore[arg-type]
+    ft.toe_length["left"] = 0.2
+    soles = {"left": pin.SE3.Identity(), "right": pin.SE3.Identity()}
+    for k in range(51):  # the waist turns 60 deg in 0.5 s, the toe's direction -90 deg
+        waist = math.radians(60.0) * k / 50
+        psi = -math.radians(90.0) * k / 50
+        kp = {  # toe 0.1 m ahead (half the length) and 0.17 m down: pointing down
+            "left_ankle": np.zeros(3),
+            "left_toe": np.array([0.1 * math.cos(psi), 0.1 * math.sin(psi), -0.17]),
+        }
+        desired, human_foot = ft.orient({}, kp, soles, lambda w=waist: w)
+        R = desired["left"].rotation
+        assert math.atan2(R[1, 0], R[0, 0]) == pytest.approx(waist, abs=1e-9)
+        assert human_foot["left"] is None  # no measured yaw: no pivot either
+    # Once the foot is level its measured yaw counts again (within FOOT_YAW_RANGE of the
+    # waist, turning at most FOOT_YAW_RATE): toe level 20 deg left of the waist.
+    psi = waist + math.radians(20.0)
+    kp = {"left_ankle": np.zeros(3), "left_toe": 0.2 * np.array([math.cos(psi), math.sin(psi), 0.0])}
+    for _ in range(10):
+        desired, human_foot = ft.orient({}, kp, soles, lambda: waist)
+    R = desired["left"].rotation
+    assert math.atan2(R[1, 0], R[0, 0]) == pytest.approx(psi, abs=1e-9)
+    assert human_foot["left"] is not None
+
+
 def test_a_foot_whose_target_is_unknown_lands_under_itself():
     """A swing target with NaN (the person's foot markers missing, C3D gaps) is no landing
     spot: the sole goes down where it is. A NaN spot left the OpenSim C3D walk's foot hovering
