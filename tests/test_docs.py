@@ -333,6 +333,7 @@ CHANGES: dict[tuple[str, str, str], tuple[dict[str, Any], Any]] = {
     ("constraints", "ground", "geometry"): ({}, "capsule"),
     ("constraints", "ground", "max_rows"): ({"entry": {"obstacle_links": None}}, 1),
     ("constraints", "ground", "trust_region"): ({}, None),
+    ("constraints", "ground", "trust_gap_fraction"): ({}, 1.0),
     ("constraints", "ground", "hull_vertices"): ({}, 8),
     ("constraints", "sole_ground", "feet"): ({}, ["left_foot"]),
     ("constraints", "sole_ground", "height"): ({}, 0.01),

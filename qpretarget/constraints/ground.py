@@ -33,7 +33,7 @@ from ..robot import RobotModel, RobotState
 from ..validation import check_bool
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
 from .contacts import Contacts
-from .self_collision import DistanceDamper, resolve_link
+from .self_collision import DistanceDamper, _trust_gap, resolve_link
 
 #: Name of the ground body in pair names and reports.
 GROUND = "ground"
@@ -70,6 +70,14 @@ class Ground(DistanceDamper):
             then turn faster, which the contact rows hold only with their corrector step
             (``contacts`` ``refine``, on by default); ``g1_whole_body.yaml`` turns it on
             (measured in docs/retargeting.md).
+        trust_gap_fraction: the trust region of a pair grows with its gap to the ground
+            (or obstacle) margin, :math:`\max(\varepsilon, f\,(d - d_s))` (the rule of the
+            self-collision constraint's ``auto`` pairs; 0 by default: the trust region is
+            ``trust_region`` at any gap). A standing leg's shank sits 2-5 cm over the floor, within
+            ``d_i``, and the fixed 0.4 mm bound capped the base's roll and pitch near 3 rad/s
+            and every leg joint near 3.4 rad/s: a roundhouse kick's pelvis, tilting at 5.7
+            rad/s, stalled 35-55 deg behind the person's turn. ``g1_whole_body.yaml`` uses 0.1
+            (docs/retargeting.md, *The ground's trust region grows with the gap*).
         hull_vertices: lighter conservative hulls (see :mod:`.self_collision`).
         name: constraint name.
 
@@ -100,6 +108,7 @@ class Ground(DistanceDamper):
         broad_phase: bool = True,
         trust_region: float | None = 2e-4,
         plane_trust: bool = False,
+        trust_gap_fraction: float = 0.0,
         hull_vertices: int | None = None,
         name: str | None = None,
     ) -> None:
@@ -110,6 +119,7 @@ class Ground(DistanceDamper):
             name=name,
         )  # fmt: skip
         self.plane_trust = check_bool(plane_trust, "plane_trust")
+        self.trust_gap = _trust_gap(trust_gap_fraction, None)
         if links is not None and (isinstance(links, str) or not isinstance(links, Sequence)):
             raise ConfigError(f"links must be a list of link names, got {links!r}.")
         if obstacles is not None and (
@@ -269,6 +279,8 @@ class Ground(DistanceDamper):
             f"ground z = {self.height} m, margin {self.d_s} m, d_i={self.d_i} m, "
             f"{self.gain_form}={self.gain_value}: {', '.join(self.links) or '-'}"
         ]
+        if self.trust_gap > 0:
+            lines.append(f"trust region grows to {self.trust_gap} of a pair's gap")
         for o in self.obstacles:
             lines.append(
                 f"obstacle {o.name} ({o.kind}) at {np.round(o.placement.translation, 3).tolist()}, "

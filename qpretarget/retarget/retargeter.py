@@ -955,7 +955,7 @@ class Retargeter:
             toe_rise=rise, moved={s: ft.moved(s, kp) for s in SIDES},
             low={s: self.detector.height[s] < self.detector.thresholds.height_on for s in SIDES},
             offset=self._settle_offsets(t, ft, kp, scaled, soles, heading),
-            hover={s: self._hovers(s) for s in SIDES},
+            hover={s: self._hovers(s) for s in SIDES}, base_yaw=yaw,
         )  # fmt: skip
         for side in SIDES:
             if before[side] == "swing" and cmd.states[side] != "swing":

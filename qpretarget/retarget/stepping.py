@@ -448,6 +448,8 @@ class KinematicStepper:
         self._omega: dict[str, float] = {}
         #: side -> the pivoting anchor's yaw, unwrapped [rad].
         self._yaw_u: dict[str, float] = {}
+        #: The robot's floating-base heading at this tick (``update``'s ``base_yaw``) [rad].
+        self._base_yaw: float | None = None
         self._anchor: dict[str, pin.SE3] = {}
         self._lift: dict[str, tuple[float, pin.SE3]] = {}
         self._toe_down: set[str] = set()
@@ -537,6 +539,7 @@ class KinematicStepper:
         low: Mapping[str, bool] | None = None,
         offset: Mapping[str, float] | None = None,
         hover: Mapping[str, bool] | None = None,
+        base_yaw: float | None = None,
     ) -> StepCommand:
         """Advance every foot by one tick.
 
@@ -567,10 +570,14 @@ class KinematicStepper:
             hover: side -> the person holds that foot just over the floor (under the
                 detector's ``height_off``, slower than its ``speed_on``): ``handover``.
                 ``None``: never.
+            base_yaw: The robot's floating-base heading now [rad]: a pivot turns its sole the
+                way that keeps it on the body's side (:meth:`_pivot_anchor`). ``None``: the
+                shorter way from where the sole is.
 
         Returns:
             The :class:`StepCommand` of this tick.
         """
+        self._base_yaw = base_yaw
         if not self._started:
             self.reset(t, soles, human_foot)
         st = self.settings
@@ -1140,7 +1147,14 @@ class KinematicStepper:
             start[4] = True
         if yaw is not None:
             yaw_u = self._yaw_u.get(side, anchor_yaw0)
-            return self._turn_anchor(side, yaw_u + wrap_angle(yaw - yaw_u))
+            if self._base_yaw is None:
+                return self._turn_anchor(side, yaw_u + wrap_angle(yaw - yaw_u))
+            # The turn that keeps the sole within half a turn of the body's heading (the hip's
+            # yaw range): the change of the sole's yaw relative to the base. The shorter way
+            # from where the sole is went the wrong way round once the sole lagged the turn
+            # by more than half a turn, and the hip at its yaw limit turned the body back.
+            b = self._base_yaw
+            return self._turn_anchor(side, yaw_u + wrap_angle(yaw - b) - wrap_angle(yaw_u - b))
         return self._turn_anchor(side, anchor_yaw0 + turn)
 
     def _turn_anchor(self, side: str, goal: float | None) -> pin.SE3 | None:

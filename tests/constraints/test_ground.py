@@ -181,3 +181,29 @@ def test_plane_trust_bounds_a_rotation_by_its_tilt_from_the_normal(g1):
 def test_plane_trust_is_a_checked_bool(g1):
     with pytest.raises(ConfigError, match="plane_trust"):
         Ground(plane_trust="yes")
+
+
+def test_the_trust_region_grows_with_the_gap_to_the_ground(g1):
+    """``trust_gap_fraction`` f: a pair's tolerated linearization error is max(eps, f d), so its
+    rotation bounds sqrt(2 eps / r) grow by sqrt(f d / eps) once f d > eps; 0 keeps eps."""
+    con0 = Ground(links=["left_knee"], d_i=1.0, trust_region=4e-4)
+    con1 = Ground(links=["left_knee"], d_i=1.0, trust_region=4e-4, trust_gap_fraction=0.1)
+    boxes = []
+    for con in (con0, con1):
+        con.bind(g1)
+        state = RobotState(g1)
+        state.update(g1.q_reference.copy())
+        con.reset(state)
+        box = con.compute_bounds(state, 0.01)
+        assert box is not None
+        boxes.append((box[1].copy(), float(con.model.distances[0])))
+    (ub0, d), (ub1, _) = boxes
+    assert 0.1 * d > 4e-4  # the knee's hull is more than 4 mm up at the reference posture
+    bounded = np.isfinite(ub0)
+    assert bounded[3:6].all()  # the base's rotations are bounded by the knee
+    np.testing.assert_allclose(ub1[bounded], ub0[bounded] * np.sqrt(0.1 * d / 4e-4), rtol=1e-9)
+
+
+def test_trust_gap_fraction_is_checked(g1):
+    with pytest.raises(ConfigError, match="trust_gap_fraction"):
+        Ground(trust_gap_fraction=2.0)

@@ -175,6 +175,46 @@ def test_a_started_pivot_follows_the_foot_yaw_even_when_the_foot_then_slides():
     assert run(moved + [(10.0 + 8.0 * k, 0.1) for k in range(1, 11)] + hold) is None
 
 
+def test_a_pivot_lagging_by_more_than_half_a_turn_goes_on_the_way_the_body_turns():
+    """A pivot turns its sole the way that keeps it within half a turn of the body's heading
+    (``base_yaw``), not the shorter way from where the sole is: once a sole lagged a fast turn
+    by more than 180 deg the shorter way went back, the hip reached its yaw limit and turned
+    the body back (DeepMimic's dance: 157 deg off)."""
+    soles = {"left": _flat(0, 0.1, 0), "right": _flat(0, -0.1, 0)}
+    one = {"left": True, "right": False}
+
+    def path(base: bool) -> np.ndarray:
+        """Unwrapped yaws [deg] of the left anchor while the person turns 250 deg in 0.1 s."""
+        st = KinematicStepper(StepSettings(), dt=0.01)
+        foot = {"left": (0.0, np.array([0.0, 0.1, 0.08])), "right": None}
+        st.update(0.0, {"left": True, "right": True}, soles, soles, foot)
+        st.update(0.1, one, soles, soles, foot)  # the right foot lifts
+        yaws = [0.0]
+        for k in range(1, 120):
+            deg = min(250.0, 25.0 * k)  # the person's foot and body turn 2500 deg/s to 250 deg
+            psi = math.radians(deg)
+            foot["left"] = (psi, np.array([0.0, 0.1, 0.08]))
+            asked = {"left": _flat(0, 0.1, 0, psi), "right": soles["right"]}
+            # The robot's body follows, at most 150 deg ahead of its sole (G1's hip yaw: 158).
+            body = math.radians(min(deg, yaws[-1] + 150.0))
+            cmd = st.update(
+                0.1 + 0.01 * k, one, soles, asked, foot, base_yaw=body if base else None
+            )
+            a = cmd.anchors.get("left")
+            if a is not None:
+                y = math.degrees(math.atan2(a.rotation[1, 0], a.rotation[0, 0]))
+                yaws.append(yaws[-1] + (y - yaws[-1] + 180.0) % 360.0 - 180.0)
+        return np.array(yaws)
+
+    with_base = path(True)
+    up = int(np.argmax(with_base >= 240.0))
+    assert up > 0 and np.all(np.diff(with_base[: up + 1]) >= 0.0)  # the way the body turns
+    # The ramped yaw rate overshoots its goal by at most 2 deg (pivot_accel's discretization).
+    assert with_base.max() < 252.0 and with_base[-1] == pytest.approx(250.0, abs=1e-6)
+    without = path(False)  # the shorter way once the lag passed 180 deg: back to -110 deg
+    assert without[-1] == pytest.approx(-110.0, abs=1e-6) and without.min() < 0.0
+
+
 @pytest.mark.parametrize("height, key", [(0.05, "swing_yaw_rate_floor"), (0.15, "swing_yaw_rate")])
 def test_a_swing_sole_turns_at_most_swing_yaw_rate(height, key):
     # A foot lifted 170 deg from the person's foot yaw (left behind while the person turned on
@@ -552,7 +592,10 @@ def test_a_foot_pointing_down_since_the_first_sample_turns_with_the_waist():
     # Once the foot is level its measured yaw counts again (within FOOT_YAW_RANGE of the
     # waist, turning at most FOOT_YAW_RATE): toe level 20 deg left of the waist.
     psi = waist + math.radians(20.0)
-    kp = {"left_ankle": np.zeros(3), "left_toe": 0.2 * np.array([math.cos(psi), math.sin(psi), 0.0])}
+    kp = {
+        "left_ankle": np.zeros(3),
+        "left_toe": 0.2 * np.array([math.cos(psi), math.sin(psi), 0.0]),
+    }
     for _ in range(10):
         desired, human_foot = ft.orient({}, kp, soles, lambda: waist)
     R = desired["left"].rotation
