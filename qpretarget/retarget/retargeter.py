@@ -904,7 +904,8 @@ class Retargeter:
         if self._foot_targets is None:
             self._foot_targets = FootTargets(
                 feet, self._cal, self._leg_scale, self.leg_lengths,
-                self._sup.stepping.swing_reach, absolute=self._sup.stepping.absolute, dt=self.dt,
+                self._sup.stepping.swing_reach, absolute=self._sup.stepping.absolute,
+                inline=self._sup.stepping.inline_feet, dt=self.dt,
             )  # fmt: skip
         ft = self._foot_targets
 

@@ -323,6 +323,83 @@ def test_a_rising_heel_rolls_the_stance_sole_onto_its_toes_about_the_front_edge(
     assert cmd.states == {"left": "swing", "right": "stance"}
 
 
+def test_a_toe_off_turning_on_the_ball_of_the_foot_turns_its_sole_about_the_front_edge():
+    """The person turns the foot 40 deg on its ball while the heel is up (toe-off): once past
+    pivot_yaw the anchor turns after it, at most pivot_rate a tick, about the middle of the
+    sole's front edge, and the sole goes down flat there (its ankle moved round the ball, as the
+    person's). Under pivot_yaw nothing turns (a walk's push-off)."""
+    toes = {s: (0.12, np.array([0.0, 0.0, 0.04])) for s in ("left", "right")}
+    settings = StepSettings()
+
+    def run(turn_deg: float) -> tuple[pin.SE3, list[float]]:
+        st = KinematicStepper(settings, dt=0.01, toes=toes)
+        soles = {"left": _flat(0, 0.1, 0), "right": _flat(0, -0.1, 0)}
+        both = {"left": True, "right": True}
+        flat = {"left": 0.0, "right": 0.0}
+        foot = {"left": None, "right": (0.0, np.array([0.0, -0.1, 0.04]))}
+        st.update(0.0, both, soles, soles, foot, toe_rise=flat)
+        rise = {"left": 0.0, "right": 0.04}
+        assert st.update(0.1, both, soles, soles, foot, toe_rise=rise).states["right"] == "toe_off"
+        yaws = []
+        for k in range(1, 31):  # 0.3 s, under toe_time: the heel stays up
+            psi = math.radians(turn_deg) * min(1.0, (k - 1) / 20)
+            foot["right"] = (psi, np.array([0.0, -0.1, 0.04]))
+            cmd = st.update(0.1 + 0.01 * k, both, soles, soles, foot, toe_rise=rise)
+            assert cmd.states["right"] == "toe_off"
+            yaws.append(math.degrees(_yaw_of_se3(st._anchor["right"])))
+            soles["right"] = cmd.feet["right"]
+        return st._anchor["right"], yaws
+
+    anchor, yaws = run(40.0)
+    assert yaws[-1] == pytest.approx(40.0, abs=1e-6)
+    lim = math.degrees(settings.pivot_rate * 0.01)
+    assert np.all(np.abs(np.diff(yaws)) <= lim + 1e-9)
+    # The middle of the front edge stayed where it was: (0.12, -0.1) on the floor.
+    ball = anchor.act(np.array([0.12, 0.0, 0.0]))
+    np.testing.assert_allclose(ball, [0.12, -0.1, 0.0], atol=1e-12)
+    assert np.linalg.norm(anchor.translation[:2] - [0.0, -0.1]) > 0.08  # the ankle swung round
+    small, yaws = run(10.0)  # under pivot_yaw (15 deg): no turn
+    assert max(abs(y) for y in yaws) == 0.0
+    np.testing.assert_allclose(small.translation, [0.0, -0.1, 0.0], atol=1e-12)
+
+
+def _yaw_of_se3(M: pin.SE3) -> float:
+    return math.atan2(M.rotation[1, 0], M.rotation[0, 0])
+
+
+def test_the_no_crossing_floor_falls_with_the_fore_aft_distance():
+    """FootTargets.crossing_floor: 70 % of the reference width while the soles side by side
+    would overlap (fore-aft up to a sole length), 0 from two sole lengths (in line, never
+    crossed); uncrossed pushes a crossed ankle to it along the hip line. The karate kata's front
+    stance (feet crossed 4 cm, 70 cm apart) was put 15 cm beside the person's."""
+    from types import SimpleNamespace
+
+    from qpretarget.retarget.feet import FootTargets
+
+    feet = SimpleNamespace(
+        sole_rectangles={"left": (-0.05, 0.12, -0.03, 0.03), "right": (-0.05, 0.12, -0.03, 0.03)},
+        ankle_of=lambda side, sole: sole.translation.copy(),
+    )
+    ft = FootTargets(feet, SimpleNamespace(), 1.0, {}, 0.97)  # type: ignore[arg-type]
+    ft.width_r = 0.2
+    assert ft.sole_length == pytest.approx(0.17)
+    for f, floor in ((0.0, 0.14), (0.17, 0.14), (-0.255, 0.07), (0.34, 0.0), (1.0, 0.0)):
+        assert ft.crossing_floor(f) == pytest.approx(floor, abs=1e-12)
+    hips = (np.array([0.0, 0.1, 0.9]), np.array([0.0, -0.1, 0.9]))  # facing +x
+    stance = _flat(0.0, 0.0, 0.0)  # the right ankle at the origin
+    far = ft.uncrossed("left", np.array([0.7, -0.04, 0.0]), stance, hips)
+    np.testing.assert_allclose(far, [0.7, 0.0, 0.0], atol=1e-12)  # in line, not crossed
+    near = ft.uncrossed("left", np.array([0.1, -0.04, 0.0]), stance, hips)
+    np.testing.assert_allclose(near, [0.1, 0.14, 0.0], atol=1e-12)  # 70 % of the width
+    wide = np.array([0.7, 0.25, 0.0])
+    np.testing.assert_allclose(ft.uncrossed("left", wide, stance, hips), wide)  # untouched
+    ft.inline = False  # stepping.inline_feet: false (Talos): 70 % at any distance
+    assert ft.crossing_floor(1.0) == pytest.approx(0.14, abs=1e-12)
+    np.testing.assert_allclose(
+        ft.uncrossed("left", np.array([0.7, -0.04, 0.0]), stance, hips), [0.7, 0.14, 0.0]
+    )
+
+
 def test_both_heels_rising_roll_both_soles_onto_their_toes_with_the_contacts_kept():
     toes = {s: (0.12, np.array([0.0, 0.0, 0.04])) for s in ("left", "right")}
     settings = StepSettings()
@@ -1194,10 +1271,10 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
     # Issue 15: no sole more than 2 mm under the floor, measured at the sole rectangle's lowest
     # corner (spin 0.5 mm; kata 2.6: a sole put down 1.4 deg tilted is flattened by the contact's
     # drift correction about its origin, one corner 2.6 mm under for 70 ms; 0.9 at the sole
-    # origins; 18 and 19 mm before the sole_ground rows). Bound 3 mm on the kata: not met,
-    # docs/retargeting.md. Stance slip < 1 mm (kata 0.61, spin 0.92 measured, with the stance
+    # origins; 18 and 19 mm before the sole_ground rows; kata 0.6-1.5 mm since stop 37, 0.8 at
+    # stop 38). Issue 15's 2 mm asserted. Stance slip < 1 mm (kata 0.61, spin 0.92 measured, with the stance
     # feet pivoting: a pivot's yaw rate ramped at 50 rad/s^2; at 100 the spin's slipped 1.2 mm).
-    assert m["sole_below_ground_mm"] < (2.0 if "spin" in clip else 3.0)
+    assert m["sole_below_ground_mm"] < 2.0
     assert m["stance_slip_mm"]["max"] < 1.0
     # Pelvis height error (kata 11.0, spin 11.3 cm measured, RMS 3.2 and 3.1; 16.5 on the
     # spin with swing soles turning 12 rad/s near the floor: a hop whose twisted stance leg
@@ -1213,8 +1290,10 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
         # pivots ramped at 100 rad/s^2 at stop 28, 20.9 at 50, 19.0 at 50 with
         # the corrector's residual in Python: round-off moves this chaotic clip by 2 deg), since
         # a sole's yaw target in flight turns with the waist plus at most FLIGHT_FOOT_YAW_RATE
-        # (23.9 before: the robot spun past the person at two flights). Issue 15: 20; bound 22.
-        assert m["heading_error_deg"]["max"] <= 22.0
+        # (23.9 before: the robot spun past the person at two flights). 6.8 since stop 38 (the
+        # ground rows' trust region growing with the gap: a standing shank 2-5 cm over the
+        # floor no longer caps the body's roll and pitch near 3 rad/s). Issue 15: 20, asserted.
+        assert m["heading_error_deg"]["max"] <= 20.0
         # Pelvis tilt, issue 15's 15 deg, as the pelvis's lean (forward, sideways) since the
         # first sample, robot vs the person's waist-and-hips triangle: 9.6 measured, RMS 2.1
         # (10.6 before flight_drift; 10.2, RMS 2.2, starting at the robot's stance width)
@@ -1253,9 +1332,13 @@ def test_fast_clips_keep_the_soles_above_the_floor_and_the_stances_pinned(clip):
         # metrics' heading alignment of the absolute placement, 0.148 with that alignment
         # alone; 0.130 before the pivots with both feet down; 0.158 with swing targets kept
         # within the
-        # standing legs' 0.92 of the leg length, stepping.swing_reach). Issue 15 asks 0.10:
-        # not met (docs/retargeting.md). Bound 0.15: the chaotic clip moves by about 0.01.
-        assert m["ankle_displacement_error_legs"]["rms"] <= 0.15
+        # standing legs' 0.92 of the leg length, stepping.swing_reach). 0.098 since stop 38:
+        # 0.122 -> 0.106 with the front stance's feet in line (stepping.inline_feet: the
+        # no-crossing floor falls with the fore-aft distance), -> 0.098 with a toe-off turning
+        # its sole about the front edge as the person's foot turns on its ball. Issue 15 asks
+        # 0.10, asserted (runs repeat to the bit on one machine; the chaotic clip moves by
+        # about 0.01 with any change of the run, so another change may cross it).
+        assert m["ankle_displacement_error_legs"]["rms"] <= 0.10
         # Its turns on one foot (100-150 deg in 0.5 s on the ball of the foot) are followed by
         # pivoting the stance sole: the heading ends 5 deg from the person's (146 deg with the
         # soles pinned flat; the largest error, 120 deg, is a 300 deg/s turn the pelvis lags).
