@@ -1372,9 +1372,9 @@ def test_both_feet_leave_the_ground_when_the_person_jumps():
     # stride from the standing foot, which carried every short landing into the next steps;
     # 0.112 with the absolute foot spots; 0.105 with the push-offs on the toes; 0.096 with swing
     # targets raised rather than pulled under the hip in flight and at landing, REACH_RAISE).
-    # Bound 0.105: the chaotic clip's figure moves by about 0.01 with round-off (kernel vs
-    # Python path).
-    assert m["ankle_displacement_error_legs"]["rms"] <= 0.105
+    # 0.039 at stop 38. Issue 15's 0.10 asserted (the chaotic clip's figure moves by about
+    # 0.01 with round-off, kernel vs Python path).
+    assert m["ankle_displacement_error_legs"]["rms"] <= 0.10
     # Flight (both feet up): the robot flies in all but at most one of the person's 12 flights
     # (12/12 with the former 20 self-collision pairs, 11/12 with `pairs: auto`), and for most
     # of the person's flight time (86 % measured: detection delay at take-off and landing).
@@ -1769,7 +1769,8 @@ def test_the_kata_played_faster_keeps_its_heading(mirror):
     A pivot that stopped once the foot had moved ``pivot_radius`` (before stop 36) left the
     anchor 94 deg behind, the pelvis twisted 160 deg over it and the heading 135 deg off to the
     end (max 144 deg, ankle error 0.236 leg lengths; mirrored 34 deg, 0.159). Now the pivot goes
-    on: measured max 25.7 / 25.1 deg, final 0.2 / -0.2 deg, ankle error 0.145 / 0.154.
+    on: measured max 25.7 / 25.1 deg, final 0.2 / -0.2 deg, ankle error 0.145 / 0.154 (stop
+    38, with the front stances in line and the toe-offs' ball pivots: about 0.09 and 12 deg).
     Bounds: final 10 deg, max 35 deg, ankle 0.18 (the chaotic clip moves by about 0.01-0.03).
     """
     traj, m, ctrl = _run(_transformed("cmu_135_06_karate_kata.bvh", 1.25, mirror))
