@@ -9,9 +9,12 @@ stance      6-D contact on, the sole pinned where it landed; it *pivots* in plac
             yaw ramped towards the person's foot yaw) when the person's foot turns by more than
             ``pivot_yaw`` while staying within ``pivot_radius`` of where it landed and the other
             foot swings (then to the end of the stance, wherever the foot goes), or by more
-            than ``pivot_yaw_double`` with the other foot standing
+            than ``pivot_yaw_double`` with the other foot standing; the way that keeps the sole
+            within half a turn of the body's heading
 toe_off     the person's heel rises while the other robot foot stands flat: contact off, the
-            sole turned about the front edge of its rectangle (:meth:`KinematicStepper.toe_pose`)
+            sole turned about the front edge of its rectangle (:meth:`KinematicStepper.toe_pose`),
+            and about the vertical through the middle of that edge as the person's foot turns
+            on its ball (:meth:`KinematicStepper._toe_pivot`)
 tiptoe      the person's heels both rise (the rise before a jump, reaching up on the toes), or
             one while the other foot is up (a hop's push-off): the 6-D contact is kept, its
             anchor turned about the sole's front edge every tick (a moving anchor: the front
@@ -1158,7 +1161,9 @@ class KinematicStepper:
         anchor's yaw then goes to ``yaw``, the sole yaw the
         person's foot asks for (the swing target's: the foot's yaw within the waist's range),
         else to its yaw at the start plus the person's turn; its rate is ramped
-        (:meth:`_turn_anchor`). Aiming at the foot's yaw rather than adding the turn also takes
+        (:meth:`_turn_anchor`), the way that keeps the sole within half a turn of the floating
+        base's heading (``update``'s ``base_yaw``; the shorter way from where the sole is
+        without it). Aiming at the foot's yaw rather than adding the turn also takes
         out the offset a landing left (the dance spin's left sole was put down 69 deg from the
         person's foot, and a pivot adding the turn kept the pelvis 40 deg behind).
         """
