@@ -402,7 +402,7 @@ def human_metrics(traj: RobotTrajectory, robot: RobotModel | None = None) -> dic
     # Alignment at the first sample.
     psi_h = np.unwrap(hip_heading(kp["left_hip"], kp["right_hip"]))
     # The alignment: the yaw of the robot pelvis's x axis at the first sample (the retargeter's
-    # absolute foot placement aligns the same way, FootTargets.set_origin).
+    # absolute foot placement aligns the same way, FootTargets.start).
     psi_r = np.unwrap(_yaw(rs.pelvis_R[:, :, 0]))
     # The heading error: the robot's heading from its pelvis frame's y axis (the line through
     # its hips), as the person's from the hip line, one construction for both. The yaw of the

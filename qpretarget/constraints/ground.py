@@ -33,7 +33,7 @@ from ..robot import RobotModel, RobotState
 from ..validation import check_bool
 from .base import CONSTRAINTS, Constraint, ConstraintBlock
 from .contacts import Contacts
-from .self_collision import DistanceDamper, _trust_gap, resolve_link
+from .self_collision import DistanceDamper, resolve_link, trust_gap_value
 
 #: Name of the ground body in pair names and reports.
 GROUND = "ground"
@@ -119,7 +119,7 @@ class Ground(DistanceDamper):
             name=name,
         )  # fmt: skip
         self.plane_trust = check_bool(plane_trust, "plane_trust")
-        self.trust_gap = _trust_gap(trust_gap_fraction, None)
+        self.trust_gap = trust_gap_value(trust_gap_fraction, None)
         if links is not None and (isinstance(links, str) or not isinstance(links, Sequence)):
             raise ConfigError(f"links must be a list of link names, got {links!r}.")
         if obstacles is not None and (

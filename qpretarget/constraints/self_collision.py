@@ -555,7 +555,7 @@ class DistanceDamper(Constraint):
         return self.d_s
 
 
-def _trust_gap(trust_gap_fraction: float | None, pairs: Any) -> float:
+def trust_gap_value(trust_gap_fraction: float | None, pairs: Any) -> float:
     """The ``trust_gap_fraction`` value (default: :data:`AUTO_TRUST_GAP` for auto pairs, else 0)."""
     if trust_gap_fraction is None:
         return AUTO_TRUST_GAP if pairs == "auto" else 0.0
@@ -707,7 +707,7 @@ class SelfCollision(DistanceDamper):
         self.optional = optional
         #: The robot has no collision geometry and the constraint is ``optional``: no rows.
         self.disabled = False
-        self.trust_gap = _trust_gap(trust_gap_fraction, pairs)
+        self.trust_gap = trust_gap_value(trust_gap_fraction, pairs)
         _check_pair_spec(pairs, links, include)
         self._pairs_spec = pairs
         self._links_spec = None if links is None else [str(x) for x in links]
