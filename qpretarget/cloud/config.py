@@ -100,6 +100,13 @@ class CalibrationConfig:
             the personalised model with transferred skinning).
         personalize_distance: observed points farther than this from the fitted template are
             left out (outliers) [m].
+        personalize_rate: while tracking, at most this many times a second [Hz], on a frame
+            fitted at least as well as the recent ones (sigma at most their median), the
+            template points that are still the robot's surface and that the sensor sees now
+            take the frame's own points (:meth:`~qpretarget.cloud.template.Template.
+            personalize_more`): the parts the calibration frame did not show (sides, back,
+            raised arms) become the person's as they come into view. 0: off (the calibration
+            frame's surface only).
         posture_weight: :math:`\lambda_p` on the squared joint change from the calibration
             posture (``initial_joints``) while calibrating (0: off).
         joint_centres: go on estimating where the subject's joint centres sit in the template
@@ -147,6 +154,7 @@ class CalibrationConfig:
     initial_joints: dict[str, float] = field(default_factory=dict)
     personalize: bool = True
     personalize_distance: float = 0.025
+    personalize_rate: float = 0.0
     posture_weight: float = 1000.0
     joint_centres: bool = True
     centre_joints: list[str] | None = None
@@ -225,6 +233,14 @@ class EMConfig:
             from the other angles giving the same rotation,
             :math:`(\theta_a + \pi, \pi - \theta_b, \theta_c + \pi)`, if they are within
             the limits, and the fit with the lower NLL (eq. 3) kept (``[]``: off).
+        joint_limits: ``{joint: [low, high]}`` [rad]: the fit's range of those joints, within
+            the robot's (the robot's limits bound the rest). The template is the *person*
+            posed with the robot's joints, and a person's trunk does not twist as far as G1's
+            waist (2.6 rad): a back seen end-on explains the cloud about as well as a front,
+            and on CMU 17_10 boxing the fit's waist yaw ran to G1's limit, the torso turned
+            170 deg from the person's. ``{}`` (default): the robot's limits. (A waist yaw
+            bound of +-0.8 rad, a person's axial range, was measured and not shipped:
+            docs/point_clouds.md, eighth round.)
     """
 
     outlier_weight: float = 0.1
@@ -257,6 +273,7 @@ class EMConfig:
     reinit_yaw_iterations: int = 10
     reinit_yaw_reset: list[str] = field(default_factory=list)
     branch_joints: list[list[str]] = field(default_factory=list)
+    joint_limits: dict[str, list[float]] = field(default_factory=dict)
 
 
 @dataclass
@@ -360,6 +377,21 @@ def _section(cls: type, spec: Any, path: str) -> Any:
                 raise ConfigError(
                     f"must be a list of joint names, got {value!r}.", path=f"{path}.{key}"
                 )
+        elif key == "joint_limits":
+            if not isinstance(value, Mapping) or not all(
+                isinstance(k, str)
+                and isinstance(v, list)
+                and len(v) == 2
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+                and v[0] < v[1]
+                for k, v in value.items()
+            ):
+                raise ConfigError(
+                    "must map joint names to [low, high] in rad with low < high, e.g. "
+                    f"{{waist_yaw_joint: [-0.8, 0.8]}}; got {value!r}.",
+                    path=f"{path}.{key}",
+                )
+            value = {str(k): [float(v[0]), float(v[1])] for k, v in value.items()}
         elif key == "centre_joints" and value is not None:
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise ConfigError(

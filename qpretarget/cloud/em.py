@@ -82,7 +82,7 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
-from ..errors import ConfigError
+from ..errors import ConfigError, close_matches_hint
 from ..problem import QPProblem
 from ..robot import RobotModel, load_robot
 from ..solvers import make_solver
@@ -699,7 +699,8 @@ class CloudRetargeter:
         qi = self.robot.joint_q_index
         vi = self.robot.joint_v_index
         self._qi, self._vi = qi, vi
-        lo, hi = self.robot.q_min[qi], self.robot.q_max[qi]
+        self.q_min, self.q_max = self._fit_limits(cfg.em.joint_limits)
+        lo, hi = self.q_min[qi], self.q_max[qi]
         self._bounded = np.isfinite(lo) & np.isfinite(hi)
         self._sole_ids = {f: self.model.getFrameId(d.frame) for f, d in self.robot.feet.items()}
         self._contact_data = self.model.createData()
@@ -730,6 +731,31 @@ class CloudRetargeter:
         self.reset()
 
     # ------------------------------------------------------------------ state
+    def _fit_limits(self, spec: dict[str, list[float]]) -> tuple[np.ndarray, np.ndarray]:
+        """The fit's joint range (nq,): the robot's, narrowed by ``em.joint_limits``.
+
+        Raises:
+            ConfigError: a joint the robot does not have, or a range outside the robot's.
+        """
+        lo, hi = self.robot.q_min.copy(), self.robot.q_max.copy()
+        model = self.robot.model
+        for name, (a, b) in spec.items():
+            if not model.existJointName(name):
+                names = [n for n in model.names[1:] if model.joints[model.getJointId(n)].nq == 1]
+                raise ConfigError(
+                    f"the robot has no joint {name!r}.{close_matches_hint(name, names)}",
+                    path=f"em.joint_limits.{name}",
+                )
+            iq = model.joints[model.getJointId(name)].idx_q
+            if a > hi[iq] or b < lo[iq]:
+                raise ConfigError(
+                    f"[{a}, {b}] rad lies outside the robot's range [{lo[iq]:.3f}, "
+                    f"{hi[iq]:.3f}] of {name!r}; give a range that overlaps it.",
+                    path=f"em.joint_limits.{name}",
+                )
+            lo[iq], hi[iq] = max(lo[iq], a), min(hi[iq], b)
+        return lo, hi
+
     def reset(self) -> None:
         """Forget the history (the next :meth:`fit` calibrates again if enabled)."""
         self.history: list[np.ndarray] = []
@@ -746,6 +772,8 @@ class CloudRetargeter:
         self._legs: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
         self._anchors: dict[str, tuple[np.ndarray, float]] = {}
         self._centre_time: float | None = None  # time of the last frame with a centre stage
+        self._personal_time: float | None = None  # ... and with online personalisation
+        self.personalized_online = 0  # cloud points the template took while tracking
         self._sub: np.ndarray | None = None  # the frame's visible template points (_pose)
         self._sigmas: list[float] = []  # sigma of the last frames that were not lost
         self._good: np.ndarray | None = None  # the last such frame's fit
@@ -786,6 +814,39 @@ class CloudRetargeter:
             return False
         self._centre_time = float(t)
         return True
+
+    def _personalize_online(
+        self,
+        S: np.ndarray,
+        Sn: np.ndarray | None,
+        q: np.ndarray,
+        sigma2: float,
+        frame: CloudFrame | np.ndarray,
+    ) -> None:
+        """Online personalisation (``calibration.personalize_rate``) after a frame's fit.
+
+        On a frame whose sigma is at most the median of the recent frames' (a fit as good as
+        usual: a lagging or lost fit would attach the person's surface in the wrong place),
+        at most ``personalize_rate`` times a second (by the frames' times; every frame without
+        them), the robot's template points in view take the frame's points
+        (:meth:`Template.personalize_more`).
+        """
+        cal = self.config.calibration
+        if not (cal.personalize and cal.personalize_rate > 0) or Sn is None:
+            return
+        if len(self._sigmas) < 3 or math.sqrt(sigma2) > float(np.median(self._sigmas)):
+            return
+        t = frame.t if isinstance(frame, CloudFrame) else None
+        if t is not None and math.isfinite(t):
+            last = self._personal_time
+            if last is not None and t - last < 1.0 / float(cal.personalize_rate) - 1e-3:
+                return
+            self._personal_time = float(t)
+        T = self.template
+        visible = self._active(T.pose(q, jacobians=False))
+        self.personalized_online += T.personalize_more(
+            q, S, Sn, visible, max_distance=cal.personalize_distance
+        )
 
     @property
     def _estimate_centres(self) -> bool:
@@ -981,8 +1042,8 @@ class CloudRetargeter:
         """
         vi, qi = self._vi[self._bounded], self._qi[self._bounded]
         qp.lb[...], qp.ub[...] = -np.inf, np.inf
-        qp.lb[vi] = np.minimum(self.robot.q_min[qi] - q[qi], 0.0)
-        qp.ub[vi] = np.maximum(self.robot.q_max[qi] - q[qi], 0.0)
+        qp.lb[vi] = np.minimum(self.q_min[qi] - q[qi], 0.0)
+        qp.ub[vi] = np.maximum(self.q_max[qi] - q[qi], 0.0)
         return vi
 
     def _e_step(
@@ -1710,7 +1771,7 @@ class CloudRetargeter:
     def _clip(self, q: np.ndarray) -> np.ndarray:
         q = q.copy()
         qi = self._qi
-        q[qi] = np.clip(q[qi], self.robot.q_min[qi], self.robot.q_max[qi])
+        q[qi] = np.clip(q[qi], self.q_min[qi], self.q_max[qi])
         return q
 
     # ------------------------------------------------------------------ robot output
@@ -1952,6 +2013,7 @@ class CloudRetargeter:
             self._sigmas.append(math.sqrt(sigma2))
             self._good = q.copy()
             del self._sigmas[: -max(self.config.em.reinit_window, 1)]
+            self._personalize_online(S, Sn, q, sigma2, frame)
         self._sub = None
         rule = ""
         if self.stability_mode == "hip_offset":
@@ -2155,7 +2217,7 @@ class CloudRetargeter:
         if self._yaw_reset.size:
             h0 = self._heading(base, self._yaw_joint)
             idx = self._yaw_reset
-            base[idx] = np.clip(0.0, self.robot.q_min[idx], self.robot.q_max[idx])
+            base[idx] = np.clip(0.0, self.q_min[idx], self.q_max[idx])
             turn = h0 - self._heading(base, self._yaw_joint)
             offsets.insert(0, 0.0)
         out = []
@@ -2270,7 +2332,7 @@ class CloudRetargeter:
             x = x + np.linalg.lstsq(J, r, rcond=None)[0]
         else:
             return None
-        lo, hi = self.robot.q_min[idx], self.robot.q_max[idx]
+        lo, hi = self.q_min[idx], self.q_max[idx]
         if not limits:
             return x
         x = _wrap_near(x, 0.5 * (lo + hi))  # into the limits' window where it can be
@@ -2303,7 +2365,7 @@ class CloudRetargeter:
         for k, idx in enumerate(self._branches):
             q = best[0]
             th = q[idx]
-            lo, hi = self.robot.q_min[idx], self.robot.q_max[idx]
+            lo, hi = self.q_min[idx], self.q_max[idx]
             if not np.any((th - lo < BRANCH_MARGIN) | (hi - th < BRANCH_MARGIN)):
                 continue
             alt = self._other_branch(q, k)

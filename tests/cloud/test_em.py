@@ -406,3 +406,101 @@ def test_yaw_search_is_checked(g1, g1_template):
             robot=g1,
             template=g1_template,
         )
+
+
+def test_fit_joint_limits_narrow_the_robots(g1, g1_meshes, frame):
+    """``em.joint_limits``: the fit's range of a joint, inside the robot's. G1 rendered with its
+    waist turned 1.2 rad (within G1's 2.6), the fit started at 0.6: with the robot's range the
+    waist goes well past 0.8 (measured 1.09 rad in the test's 15 iterations), with [-0.8, 0.8]
+    it ends on that bound (never past it: the QP's bounds and the clip; 1e-6 below it, the
+    solver's tolerance, measured 3e-8); every other joint keeps the robot's range."""
+    _, q, sensor, T = frame
+    iw = g1.joint_q_index[g1.joint_index("waist_yaw_joint")]
+    target = q.copy()
+    target[iw] = 1.2
+    data = g1.model.createData()
+    pin.forwardKinematics(g1.model, data, target)
+    cam = kinect_camera([1.8, 0.3, 1.0], [0.0, 0.0, 0.65], downscale=2)
+    cloud = render_cloud(
+        g1_meshes, data, cam, noise=0.005, outlier_fraction=0.05, rng=np.random.default_rng(2)
+    )["points"]
+    waist = {}
+    for bound in (None, 0.8):
+        limits = {} if bound is None else {"waist_yaw_joint": [-bound, bound]}
+        rt = fitter(g1, T, sensor, estep="kdtree", joint_limits=limits)
+        start = target.copy()
+        start[iw] = 0.6
+        rt.history, rt._good = [start], start.copy()
+        waist[bound] = rt.fit(CloudFrame(cloud)).q_fit[iw]
+        if bound is not None:
+            others = np.ones(g1.model.nq, bool)
+            others[iw] = False
+            assert np.array_equal(rt.q_min[others], g1.q_min[others])
+            assert np.array_equal(rt.q_max[others], g1.q_max[others])
+            assert (rt.q_min[iw], rt.q_max[iw]) == (-0.8, 0.8)
+    assert waist[None] > 1.0
+    assert 0.8 - 1e-6 < waist[0.8] <= 0.8
+
+
+def test_fit_joint_limits_are_checked(g1, g1_template):
+    """A malformed range, an unknown joint (with the near names) or a range outside the robot's
+    is refused with its YAML path."""
+    from qpretarget.cloud.config import CloudConfig
+    from qpretarget.errors import ConfigError
+
+    for bad in ({"waist_yaw_joint": [0.5, -0.5]}, {"waist_yaw_joint": 0.8}, ["waist_yaw_joint"]):
+        with pytest.raises(ConfigError, match=r"em\.joint_limits"):
+            CloudConfig.from_dict({"em": {"joint_limits": bad}})
+    cases = {
+        "waist_yaw": r"em\.joint_limits\.waist_yaw.*no joint.*waist_yaw_joint",
+        "waist_roll_joint": r"outside the robot's range",
+    }
+    for name, pattern in cases.items():
+        with pytest.raises(ConfigError, match=pattern):
+            CloudRetargeter(
+                {
+                    "robot": "g1",
+                    "calibration": {"enabled": False},
+                    "em": {"joint_limits": {name: [1.0, 2.0]}},
+                },  # fmt: skip
+                robot=g1,
+                template=g1_template,
+            )
+
+
+def test_online_personalisation_is_rate_and_sigma_gated(g1, g1_meshes, g1_sequence, monkeypatch):
+    """``calibration.personalize_rate``: while tracking, the template takes the cloud's points
+    at most that many times a second, and only after a frame fitted at least as well as the
+    recent ones (sigma at most their median; a lagging fit would attach the person's surface
+    in the wrong place). The G1-posed sequence at 10 Hz with 5 Hz: called on frames at least
+    0.2 s apart, each with a sigma at most the median of the frames so far; the points taken
+    are the template's observed ones (no calibration here). Off (0): never called."""
+    calls: list[int] = []
+    results_so_far: list = []
+    original = Template.personalize_more
+
+    def spy(self, q, points, normals, visible, *, max_distance):
+        calls.append(len(results_so_far))
+        return original(self, q, points, normals, visible, max_distance=max_distance)
+
+    monkeypatch.setattr(Template, "personalize_more", spy)
+    for rate in (0.0, 5.0):
+        calls.clear()
+        results_so_far.clear()
+        T = Template(g1, n_points=1500, meshes=g1_meshes, link_density_exponent=0.5)
+        cfg = {"robot": "g1", "stability": {"mode": "none"},
+               "calibration": {"enabled": False, "personalize_rate": rate},
+               "input": {"points": 1500, "voxel": 0.0}}  # fmt: skip
+        rt = CloudRetargeter(cfg, robot=g1, template=T)
+        rt.run(g1_sequence.sequence, callback=lambda i, r: results_so_far.append(r))
+        if rate == 0.0:
+            assert calls == [] and rt.personalized_online == 0 and not T.observed.any()
+            continue
+        assert 3 <= len(calls) <= 11
+        t = g1_sequence.sequence.t
+        assert np.all(np.diff(t[calls]) >= 1.0 / rate - 1e-3)
+        sig = np.sqrt([r.sigma2 for r in results_so_far])
+        for k in calls:
+            assert sig[k] <= np.median(sig[max(0, k - 29) : k + 1]) + 1e-15
+        assert rt.personalized_online > 0
+        assert T.observed.sum() == rt.personalized_online

@@ -243,3 +243,60 @@ def test_posing_a_subset_is_the_same_rows(g1_template, posture):
     Hqe_s, Hee_s, be_s = T.centre_normal_equations(sub, J6, P1[idx], E[idx])
     for a, c in ((Hqe_s, Hqe), (Hee_s, Hee), (be_s, be)):
         assert np.allclose(a, c, rtol=1e-12, atol=1e-12 * max(np.abs(c).max(), 1e-300))
+
+
+def _facing(posed, eye: np.ndarray) -> np.ndarray:
+    """Template points whose normals face a sensor at ``eye`` (the back-face test of the fit)."""
+    return np.einsum("ma,ma->m", posed.normals, posed.points - eye) < 0.0
+
+
+def test_personalize_more_takes_the_newly_seen_surface(g1, g1_meshes):
+    """Online personalisation (``Template.personalize_more``): after the front view made the
+    front the subject's own surface, a view from behind replaces the robot's points it sees by
+    the cloud's, attached to their joints; the front's points stay as they were. Exact
+    bookkeeping (counts, flags, distances) and the new points posed exactly where the cloud's
+    are (1e-9 m: a rigid attachment evaluated at the pose it was taken at)."""
+    from qpretarget.cloud.render import kinect_camera, render_cloud
+
+    T = Template(g1, n_points=1500, meshes=g1_meshes, link_density_exponent=0.5)
+    q = g1.q_reference.copy()
+    data = g1.model.createData()
+    pin.forwardKinematics(g1.model, data, q)
+    front = kinect_camera([1.8, 0.0, 1.0], [0.0, 0.0, 0.65], downscale=2)
+    back = kinect_camera([-1.8, 0.0, 1.0], [0.0, 0.0, 0.65], downscale=2)
+    clouds = [
+        render_cloud(g1_meshes, data, cam, noise=0.0, rng=np.random.default_rng(k))
+        for k, cam in enumerate((front, back))
+    ]
+    n_front = T.personalize(
+        q,
+        clouds[0]["points"],
+        clouds[0]["normals"],
+        ~_facing(T.pose(q), front.position),
+        max_distance=0.025,
+    )
+    assert n_front > 0 and T.observed.sum() == n_front
+    before = T.pose(q).points[T.observed].copy()
+    seen = _facing(T.pose(q), back.position)
+    # The back is still the robot's (some of the front's points at the silhouette face back).
+    assert (seen & ~T.observed).sum() > 0.7 * seen.sum() > 0  # measured 0.79
+    P, N = clouds[1]["points"], clouds[1]["normals"]
+    n_back = T.personalize_more(q, P, N, seen, max_distance=0.025)
+    assert n_back > 0
+    assert T.observed.sum() == n_front + n_back
+    posed = T.pose(q)
+    # The front's points are the same points (the order within a joint may change).
+    kept = posed.points[T.observed]
+    from scipy.spatial import cKDTree
+
+    assert np.max(cKDTree(kept).query(before)[0]) < 1e-9
+    # Every new point is one of the back cloud's points, on its joint's rigid frame.
+    d_new = cKDTree(P).query(kept)[0]
+    assert np.sum(d_new < 1e-9) == n_back
+    # The robot's points left that the back sees have no new point within the distance.
+    new = kept[d_new < 1e-9]
+    left = ~T.observed & _facing(posed, back.position)
+    if left.any():
+        assert np.min(cKDTree(new).query(posed.points[left])[0]) > 0.025
+    # Nothing in view that is still the robot's: nothing to take.
+    assert T.personalize_more(q, P, N, np.zeros(T.n_points, bool), max_distance=0.025) == 0
