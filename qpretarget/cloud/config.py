@@ -107,6 +107,11 @@ class CalibrationConfig:
             personalize_more`): the parts the calibration frame did not show (sides, back,
             raised arms) become the person's as they come into view. 0: off (the calibration
             frame's surface only).
+        personalize_segments: the template segments (:attr:`~qpretarget.cloud.template.
+            Template.segment_names`: ``pelvis``, ``torso``, ``upper_arm``...) whose robot
+            points ``personalize_rate`` may replace; ``null``: all of them. The shipped config
+            takes the trunk's alone: the trunk's heading is what the worst arm frames were made
+            of, while the limbs, personalised too, moved the fit's arms further off.
         posture_weight: :math:`\lambda_p` on the squared joint change from the calibration
             posture (``initial_joints``) while calibrating (0: off).
         joint_centres: go on estimating where the subject's joint centres sit in the template
@@ -155,6 +160,7 @@ class CalibrationConfig:
     personalize: bool = True
     personalize_distance: float = 0.025
     personalize_rate: float = 0.0
+    personalize_segments: list[str] | None = None
     posture_weight: float = 1000.0
     joint_centres: bool = True
     centre_joints: list[str] | None = None
@@ -392,6 +398,12 @@ def _section(cls: type, spec: Any, path: str) -> Any:
                     path=f"{path}.{key}",
                 )
             value = {str(k): [float(v[0]), float(v[1])] for k, v in value.items()}
+        elif key == "personalize_segments" and value is not None:
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise ConfigError(
+                    f"must be a list of segment names or null, got {value!r}.",
+                    path=f"{path}.{key}",
+                )
         elif key == "centre_joints" and value is not None:
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise ConfigError(

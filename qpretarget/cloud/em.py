@@ -700,6 +700,7 @@ class CloudRetargeter:
         vi = self.robot.joint_v_index
         self._qi, self._vi = qi, vi
         self.q_min, self.q_max = self._fit_limits(cfg.em.joint_limits)
+        self._personal_segments = self._segment_ids(cfg.calibration.personalize_segments)
         lo, hi = self.q_min[qi], self.q_max[qi]
         self._bounded = np.isfinite(lo) & np.isfinite(hi)
         self._sole_ids = {f: self.model.getFrameId(d.frame) for f, d in self.robot.feet.items()}
@@ -755,6 +756,24 @@ class CloudRetargeter:
                 )
             lo[iq], hi[iq] = max(lo[iq], a), min(hi[iq], b)
         return lo, hi
+
+    def _segment_ids(self, names: list[str] | None) -> np.ndarray | None:
+        """Indices of the template segments ``names`` (``calibration.personalize_segments``).
+
+        Raises:
+            ConfigError: a name that is not one of the template's segments.
+        """
+        if names is None:
+            return None
+        known = list(self.template.segment_names)
+        for n in names:
+            if n not in known:
+                raise ConfigError(
+                    f"no template segment {n!r}.{close_matches_hint(n, known)} "
+                    f"Segments: {', '.join(known)}.",
+                    path="calibration.personalize_segments",
+                )
+        return np.array([known.index(n) for n in names], dtype=int)
 
     def reset(self) -> None:
         """Forget the history (the next :meth:`fit` calibrates again if enabled)."""
@@ -828,8 +847,8 @@ class CloudRetargeter:
         On a frame whose sigma is at most the median of the recent frames' (a fit as good as
         usual: a lagging or lost fit would attach the person's surface in the wrong place),
         at most ``personalize_rate`` times a second (by the frames' times; every frame without
-        them), the robot's template points in view take the frame's points
-        (:meth:`Template.personalize_more`).
+        them), the robot's template points in view, of the ``personalize_segments``, take the
+        frame's points (:meth:`Template.personalize_more`).
         """
         cal = self.config.calibration
         if not (cal.personalize and cal.personalize_rate > 0) or Sn is None:
@@ -844,8 +863,10 @@ class CloudRetargeter:
             self._personal_time = float(t)
         T = self.template
         visible = self._active(T.pose(q, jacobians=False))
+        segs = self._personal_segments
+        allowed = None if segs is None else np.isin(T.point_segment, segs)
         self.personalized_online += T.personalize_more(
-            q, S, Sn, visible, max_distance=cal.personalize_distance
+            q, S, Sn, visible, max_distance=cal.personalize_distance, allowed=allowed
         )
 
     @property

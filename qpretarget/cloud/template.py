@@ -612,6 +612,7 @@ class Template:
         visible: np.ndarray,
         *,
         max_distance: float,
+        allowed: np.ndarray | None = None,
     ) -> int:
         r"""Give the subject's surface to the robot's points the sensor sees now (online IV.A).
 
@@ -625,7 +626,9 @@ class Template:
         template point is still the robot's (``~observed``) and within ``max_distance`` of it
         are attached to that point's joint; the robot's visible points with such a cloud point
         within ``max_distance`` are dropped (:meth:`personalize` with them as the seen ones).
-        The subject's points already in the template stay.
+        The subject's points already in the template stay. ``allowed`` (M,) limits the points
+        that may be replaced (e.g. the trunk's segments): a cloud point whose nearest visible
+        template point is not allowed is left out.
 
         Returns:
             The number of cloud points attached (0: nothing new in view).
@@ -633,6 +636,8 @@ class Template:
         from scipy.spatial import cKDTree
 
         fresh = np.asarray(visible, bool) & ~self.observed
+        if allowed is not None:
+            fresh &= np.asarray(allowed, bool)
         vis = np.flatnonzero(visible)
         if not fresh.any() or len(points) == 0:
             return 0

@@ -474,14 +474,15 @@ def test_online_personalisation_is_rate_and_sigma_gated(g1, g1_meshes, g1_sequen
     recent ones (sigma at most their median; a lagging fit would attach the person's surface
     in the wrong place). The G1-posed sequence at 10 Hz with 5 Hz: called on frames at least
     0.2 s apart, each with a sigma at most the median of the frames so far; the points taken
-    are the template's observed ones (no calibration here). Off (0): never called."""
+    are the template's observed ones (no calibration here), all of them on the torso with
+    ``personalize_segments: [torso]``. Off (0): never called."""
     calls: list[int] = []
     results_so_far: list = []
     original = Template.personalize_more
 
-    def spy(self, q, points, normals, visible, *, max_distance):
+    def spy(self, q, points, normals, visible, **kw):
         calls.append(len(results_so_far))
-        return original(self, q, points, normals, visible, max_distance=max_distance)
+        return original(self, q, points, normals, visible, **kw)
 
     monkeypatch.setattr(Template, "personalize_more", spy)
     for rate in (0.0, 5.0):
@@ -489,7 +490,8 @@ def test_online_personalisation_is_rate_and_sigma_gated(g1, g1_meshes, g1_sequen
         results_so_far.clear()
         T = Template(g1, n_points=1500, meshes=g1_meshes, link_density_exponent=0.5)
         cfg = {"robot": "g1", "stability": {"mode": "none"},
-               "calibration": {"enabled": False, "personalize_rate": rate},
+               "calibration": {"enabled": False, "personalize_rate": rate,
+                               "personalize_segments": ["torso"]},
                "input": {"points": 1500, "voxel": 0.0}}  # fmt: skip
         rt = CloudRetargeter(cfg, robot=g1, template=T)
         rt.run(g1_sequence.sequence, callback=lambda i, r: results_so_far.append(r))
@@ -504,3 +506,20 @@ def test_online_personalisation_is_rate_and_sigma_gated(g1, g1_meshes, g1_sequen
             assert sig[k] <= np.median(sig[max(0, k - 29) : k + 1]) + 1e-15
         assert rt.personalized_online > 0
         assert T.observed.sum() == rt.personalized_online
+        names = np.array(T.segment_names)[T.point_segment]
+        assert set(names[T.observed]) == {"torso"}
+
+
+def test_personalize_segments_are_checked(g1, g1_template):
+    """A segment name the template does not have is refused with its path and the names."""
+    from qpretarget.cloud.config import CloudConfig
+    from qpretarget.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"calibration\.personalize_segments"):
+        CloudConfig.from_dict({"calibration": {"personalize_segments": "torso"}})
+    with pytest.raises(ConfigError, match=r"no template segment 'trunk'.*Segments: pelvis"):
+        CloudRetargeter(
+            {"robot": "g1", "calibration": {"personalize_segments": ["trunk"]}},
+            robot=g1,
+            template=g1_template,
+        )
