@@ -539,6 +539,7 @@ def human_clip_sequence(
     seed: int = 0,
     poser: HumanPoser | None = None,
     downscale: int = 2,
+    ground_window: float = 1.0,
 ) -> tuple[SyntheticSequence, HumanPoser]:
     """The human model posed by a clip, rendered by a Kinect-like camera in front of it.
 
@@ -546,7 +547,12 @@ def human_clip_sequence(
     abducted by ``arm_abduction`` [rad], feet centred where the clip's first frame has them,
     facing the clip's first heading), then
     ``calibration_frames`` frames interpolating to the clip's first pose, then the clip. The
-    floor is put at z = 0 under the lowest point of the first frame.
+    person stands on the floor (z = 0): the calibration posture's lowest point is on it (and
+    each frame's moving into the clip), and each clip frame is lowered or raised by the lowest
+    point of the model within ``ground_window`` seconds around it (a jump shorter than half
+    the window keeps its flight). The clip's root heights are the performer's, and the model's
+    legs are not: placed at the clip's root height, a crouched boxer floated 18-24 cm above
+    the floor.
 
     Args:
         keypoints: clip key-points, name -> (T, 3) [m], z up (``keypoint_positions(motion)``).
@@ -561,6 +567,8 @@ def human_clip_sequence(
         poser: an existing :class:`HumanPoser` (built otherwise).
         downscale: the Kinect V2 image (512 x 424) divided by this (2: about 2,300 points on
             the person at 2.8 m; 1: about 9,000).
+        ground_window: the window [s] over which the lowest point of the model is put on the
+            floor.
     """
     poser = poser if poser is not None else HumanPoser()
     h = poser.robot
@@ -579,15 +587,25 @@ def human_clip_sequence(
     here, there = poser.model_keypoints(qa), poser.model_keypoints(Q[0])
     mid = [0.5 * (k["left_ankle"] + k["right_ankle"])[:2] for k in (here, there)]
     qa[:2] += mid[1] - mid[0]
-    n = int(calibration_frames)
-    lead = [pin.interpolate(h.model, qa, Q[0], a) for a in np.linspace(0.0, 1.0, n + 2)[:-1]]
-    Qall = np.array(lead + list(Q))
-    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / 30.0
-    times = np.concatenate([np.arange(len(lead)) * dt, t - t[0] + len(lead) * dt])
     meshes = load_link_meshes(h.model, h.urdf_path)
     data = h.model.createData()
-    pin.forwardKinematics(h.model, data, Qall[0])
-    Qall[:, 2] -= meshes.posed(data)[..., 2].min()
+
+    def lowest(q: np.ndarray) -> float:
+        pin.forwardKinematics(h.model, data, q)
+        return float(meshes.posed(data)[..., 2].min())
+
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / 30.0
+    Q = np.array(Q, float)
+    low = np.array([lowest(q) for q in Q])
+    r = max(int(round(0.5 * float(ground_window) / dt)), 0)
+    Q[:, 2] -= [low[max(0, i - r) : i + r + 1].min() for i in range(len(Q))]
+    qa[2] -= lowest(qa)
+    n = int(calibration_frames)
+    lead = [pin.interpolate(h.model, qa, Q[0], a) for a in np.linspace(0.0, 1.0, n + 2)[:-1]]
+    for q in lead[1:]:  # standing on the floor while moving into the clip
+        q[2] -= lowest(q)
+    Qall = np.array(lead + list(Q))
+    times = np.concatenate([np.arange(len(lead)) * dt, t - t[0] + len(lead) * dt])
     w0 = np.asarray(keypoints["waist"][0], float).copy()
     w0[2] = 0.0
     camera = kinect_camera(

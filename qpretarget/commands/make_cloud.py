@@ -24,6 +24,9 @@ HELP = """examples:
 
 The sequence starts with 5 frames of the calibration posture moving into the clip (stand
 facing the sensor, arms slightly away from the body), as retarget-cloud's calibration expects.
+The person stands on the floor (z = 0) throughout: each frame's height is set by the model's
+lowest point within 1 s around it, not by the clip's root height (the performer's legs are not
+the model's), so that a jump keeps its flight and a crouch does not float.
 The human model's configurations are stored with the clouds (meta/human_q) as the truth.
 Layout of the file and how the rendering works: docs/point_clouds.md
 """
