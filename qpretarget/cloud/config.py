@@ -193,6 +193,13 @@ class EMConfig:
             (0: off; not in Wang 2017, see ``docs/point_clouds.md``).
         contact_anchor: the same term also keeps each supporting sole where it was put down
             (its x, y and heading; 1 cm of slip weighs like 0.1 rad of tilt): no foot slip.
+        contact_height: the term holds a supporting sole only while the fit puts it within
+            this height of the floor (z = 0) [m]; ``null``: at any height (before). A sole
+            higher than that is a heel raised on the ball of the foot, a person on tiptoe, or
+            a foot shuffling: held flat and in place there, it twisted the fit's legs and
+            pelvis away from the person's (CMU 14_07 reach-up on tiptoe: the fit's soles 10-32
+            cm from the person's ankles). The support itself (balance rows, the command's
+            stance) still comes from the support tracker.
         temporal_reference: ``previous`` (eq. 16: change from the previous frame) or
             ``prediction`` (change from the auto-regressive prediction, which does not lag).
         normal_weight: :math:`\lambda_\perp = \lambda_f` of eq. 15 and 21 (V.C: 0.5).
@@ -258,6 +265,7 @@ class EMConfig:
     temporal_reference: str = "prediction"
     contact_weight: float = 1.0e4
     contact_anchor: bool = True
+    contact_height: float | None = None
     normal_weight: float = 0.5
     normal_scale: float = 0.05
     refine_iterations: int = 3
@@ -383,6 +391,15 @@ def _section(cls: type, spec: Any, path: str) -> Any:
                 raise ConfigError(
                     f"must be a list of joint names, got {value!r}.", path=f"{path}.{key}"
                 )
+        elif key == "contact_height":
+            if value is not None and (
+                isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0
+            ):
+                raise ConfigError(
+                    f"must be a height > 0 [m] or null (no limit), got {value!r}.",
+                    path=f"{path}.{key}",
+                )
+            value = None if value is None else float(value)
         elif key == "joint_limits":
             if not isinstance(value, Mapping) or not all(
                 isinstance(k, str)

@@ -2017,8 +2017,10 @@ class CloudRetargeter:
         support = Support()
         self._contact_feet = ()
         if self.stability_mode != "none":
-            support = self.tracker.update(self.sole_heights(q))
-            self._contact_feet = tuple(support.feet)
+            heights = self.sole_heights(q)
+            support = self.tracker.update(heights)
+            top = em.contact_height
+            self._contact_feet = tuple(f for f in support.feet if top is None or heights[f] <= top)
             self.rows.set_support(support, q)
             if self.stability_mode == "qp":
                 q, ok = self._restore_balance(q)

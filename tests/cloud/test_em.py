@@ -12,6 +12,7 @@ import pytest
 from qpretarget.cloud.em import CloudRetargeter, e_step
 from qpretarget.cloud.io import CloudFrame
 from qpretarget.cloud.render import kinect_camera, render_cloud
+from qpretarget.cloud.stability import Support
 from qpretarget.cloud.template import Template
 
 
@@ -523,3 +524,51 @@ def test_personalize_segments_are_checked(g1, g1_template):
             robot=g1,
             template=g1_template,
         )
+
+
+def test_contact_height_releases_raised_soles(g1, frame):
+    """``em.contact_height``: the contact term holds a supporting sole only while the fit puts
+    it within that height of the floor. The robot of the test frame started 8 cm up (both
+    soles 8 cm above the floor, both supporting by the tracker's relative rule): with 0.05 m no
+    sole is held, with none (the default) both are. One sole raised 6.6 cm by its knee after
+    a double support (still supporting: the tracker releases a sole 7 cm up): that one is
+    released from the term, the other held. The support itself is the tracker's either way."""
+    S, q, sensor, T = frame
+    lifted = q.copy()
+    lifted[2] += 0.08
+    cases = {None: set(g1.feet), 0.05: set()}
+    for top, held in cases.items():
+        rt = fitter(g1, T, sensor, contact_height=top)
+        rt.config.stability.mode = "qp"
+        rt2 = CloudRetargeter(rt.config, robot=g1, template=T)
+        rt2.sensor_position = sensor
+        rt2.history = [lifted]
+        res = rt2.fit(CloudFrame(S))
+        assert set(res.support.feet) == set(g1.feet)
+        assert set(rt2._contact_feet) == held
+    one = q.copy()
+    foot = sorted(g1.feet)[0]
+    knee = g1.joint_q_index[g1.joint_index(f"{foot.split('_')[0]}_knee_joint")]
+    one[knee] += 0.45  # the shank swings back: that sole rises 6.6 cm
+    rt = fitter(g1, T, sensor, contact_height=0.05)
+    rt.config.stability.mode = "qp"
+    rt2 = CloudRetargeter(rt.config, robot=g1, template=T)
+    rt2.sensor_position = sensor
+    heights = rt2.sole_heights(one)
+    assert 0.07 > heights[foot] > 0.05 > max(h for f, h in heights.items() if f != foot)
+    rt2.tracker.previous = Support(sorted(g1.feet), foot)  # both supported the frame before
+    rt2.history = [one]
+    res = rt2.fit(CloudFrame(S))
+    assert set(res.support.feet) == set(g1.feet)
+    assert set(rt2._contact_feet) == set(g1.feet) - {foot}
+
+
+def test_contact_height_is_checked():
+    """A height that is not a number > 0 (or null) is refused with its YAML path."""
+    from qpretarget.cloud.config import CloudConfig
+    from qpretarget.errors import ConfigError
+
+    for bad in (0.0, -0.1, "5 cm", True):
+        with pytest.raises(ConfigError, match=r"em\.contact_height"):
+            CloudConfig.from_dict({"em": {"contact_height": bad}})
+    assert CloudConfig.from_dict({"em": {"contact_height": None}}).em.contact_height is None
