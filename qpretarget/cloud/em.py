@@ -729,6 +729,9 @@ class CloudRetargeter:
         #: Template points moved to the segment on their side of a person's centre at the
         #: calibration (``calibration.centre_cuts``).
         self.recut_points = 0
+        # The template as built: every run (reset) starts from it, not from the surface the
+        # previous subject left (calibration and online personalisation change it).
+        self._template_state = self.template.surface_state()
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -776,7 +779,13 @@ class CloudRetargeter:
         return np.array([known.index(n) for n in names], dtype=int)
 
     def reset(self) -> None:
-        """Forget the history (the next :meth:`fit` calibrates again if enabled)."""
+        """Forget the history and the subject; the template as it was built.
+
+        The next :meth:`fit` calibrates again if enabled. The template is put back as it was
+        when the fitter was built: calibration and online personalisation gave it the last
+        subject's surface, which a new run would otherwise start from.
+        """
+        self.template.restore_surface(self._template_state)
         self.history: list[np.ndarray] = []
         self.sensor_position: np.ndarray | None = None
         self.calibrated = not self.config.calibration.enabled

@@ -604,6 +604,35 @@ class Template:
         self.set_scales(self.scales)
         return int(ok.sum())
 
+    #: What :meth:`personalize`, :meth:`personalize_more`, :meth:`assign_by_centres`,
+    #: :meth:`set_scales` and :meth:`set_centre_rest` change (:meth:`surface_state`).
+    _STATE = (
+        "points0",
+        "normals0",
+        "joint",
+        "link",
+        "observed",
+        "point_segment",
+        "scales",
+        "centre_offsets",
+        "_R0",
+    )
+
+    def surface_state(self) -> dict[str, np.ndarray]:
+        """Copies of the template's points, their joints, scales and centres (a snapshot).
+
+        :meth:`restore_surface` puts them back: a fitter that calibrates again (a new person,
+        a new run) starts from the template as it was built, not from the previous subject's
+        personalised surface.
+        """
+        return {k: np.array(getattr(self, k), copy=True) for k in self._STATE}
+
+    def restore_surface(self, state: dict[str, np.ndarray]) -> None:
+        """Put back a :meth:`surface_state` (and the model's placements with its scales)."""
+        for k in self._STATE:
+            setattr(self, k, np.array(state[k], copy=True))
+        self.set_scales(self.scales)
+
     def personalize_more(
         self,
         q: np.ndarray,
