@@ -662,7 +662,7 @@ class Template:
         Returns:
             The number of cloud points attached (0: nothing new in view).
         """
-        from scipy.spatial import cKDTree
+        from .neighbours import knn
 
         fresh = np.asarray(visible, bool) & ~self.observed
         if allowed is not None:
@@ -671,14 +671,14 @@ class Template:
         if not fresh.any() or len(points) == 0:
             return 0
         posed = self.pose(q, jacobians=False, normals=False)
-        dist, nb = cKDTree(posed.points[vis]).query(points)
-        take = (dist <= max_distance) & fresh[vis[nb]]
+        d2, nb = knn(posed.points[vis], points, 1)
+        take = (d2[:, 0] <= max_distance**2) & fresh[vis[nb[:, 0]]]
         if not take.any():
             return 0
         cand = np.flatnonzero(fresh)
-        d_back, _ = cKDTree(points[take]).query(posed.points[cand])
+        d2_back, _ = knn(points[take], posed.points[cand], 1)
         drop = np.zeros(self.n_points, bool)
-        drop[cand[d_back <= max_distance]] = True
+        drop[cand[d2_back[:, 0] <= max_distance**2]] = True
         if not drop.any():
             return 0
         return self.personalize(q, points[take], normals[take], ~drop, max_distance=max_distance)
