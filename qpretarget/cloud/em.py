@@ -605,7 +605,9 @@ class FrameResult:
         iterations: EM iterations (both stages). support: supporting feet.
         com_margin: signed distance of the robot's CoM projection inside the unshrunk support
             polygon [m] (NaN in flight).
-        status: ``ok``, ``relaxed`` (balance could not be restored) or ``held`` (fit failed).
+        status: ``ok``, ``relaxed`` (balance could not be restored) or ``held`` (not fitted:
+            fewer than :data:`MIN_CLOUD_POINTS` cloud points, the person out of view; the
+            last frame's pose kept).
         log: per-iteration log. time: wall time [s]. rule: what the hip-offset rule did.
     """
 
@@ -620,6 +622,15 @@ class FrameResult:
     log: list[IterationLog] = field(default_factory=list)
     time: float = 0.0
     rule: str = ""
+
+
+#: Fewest cloud points (after cropping) a frame is fitted on; with fewer a tracking fit holds
+#: its last pose (status ``held``) and the first frame is refused.
+MIN_CLOUD_POINTS = 10
+
+
+class TooFewPoints(ConfigError):
+    """A frame with fewer than :data:`MIN_CLOUD_POINTS` cloud points after cropping."""
 
 
 #: Newton iterations of a supporting leg put onto its sole's placement (``stability.plant``).
@@ -805,6 +816,7 @@ class CloudRetargeter:
         self._sub: np.ndarray | None = None  # the frame's visible template points (_pose)
         self._sigmas: list[float] = []  # sigma of the last frames that were not lost
         self._good: np.ndarray | None = None  # the last such frame's fit
+        self._last: FrameResult | None = None  # the last frame fitted (what a held one keeps)
         if self.stability_mode != "none":
             self.tracker.reset()
         self._solver.reset()
@@ -900,8 +912,8 @@ class CloudRetargeter:
             max_points=inp.points,
             rng=np.random.default_rng(inp.seed + rng_seed),
         )
-        if len(S) < 10:
-            raise ConfigError(
+        if len(S) < MIN_CLOUD_POINTS:
+            raise TooFewPoints(
                 f"only {len(S)} cloud points left after cropping; check input.crop and the "
                 "world frame (z up, floor at z = 0).",
                 path="input.crop",
@@ -2010,7 +2022,29 @@ class CloudRetargeter:
         em = self.config.em
         self._sub = None
         self._normals_job, self._frame_normals = None, None
-        S, Sn = self._prepare(frame, index)
+        try:
+            S, Sn = self._prepare(frame, index)
+        except TooFewPoints:
+            if not (self.calibrated and self.history and self._last is not None):
+                raise  # nothing to hold: the first frame must show the person
+            # The person out of view (walked past the sensor, occluded): hold the last pose
+            # and say so; the run goes on with the next frame that shows them.
+            self.history.append(self.history[-1].copy())
+            del self.history[: -max(self.config.em.ar_window + 2, 4)]
+            last = self._last
+            return FrameResult(
+                last.q_fit.copy(),
+                last.q_robot.copy(),
+                last.sigma2,
+                last.nll,
+                0,
+                last.support,
+                last.com_margin,
+                "held",
+                [],
+                time.perf_counter() - t0,
+                "",
+            )
         log: list[IterationLog] = []
         q_prev = self.history[-1] if self.history else None
         if not self.calibrated:
@@ -2063,7 +2097,7 @@ class CloudRetargeter:
         self.history.append(q.copy())
         if len(self.history) > max(em.ar_window + 2, 4):
             self.history.pop(0)
-        return FrameResult(
+        self._last = FrameResult(
             q,
             q_robot,
             sigma2,
@@ -2076,6 +2110,7 @@ class CloudRetargeter:
             time.perf_counter() - t0,
             rule,
         )
+        return self._last
 
     def _stages(
         self,

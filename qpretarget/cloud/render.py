@@ -253,6 +253,8 @@ def corrupt(
         1.0 + rng.normal(0.0, noise, size=(len(points), 1)) / rng_dist
     )
     k = int(round(outlier_fraction / (1.0 - outlier_fraction) * len(points)))
+    if k == 0:  # no outliers asked, or nothing in view (the person out of the image)
+        return noisy, np.zeros(len(noisy), bool)
     lo, hi = points.min(axis=0) - box_margin, points.max(axis=0) + box_margin
     lo[2] = max(lo[2], points[:, 2].min())
     out = rng.uniform(lo, hi, size=(k, 3))

@@ -598,3 +598,30 @@ def test_every_run_starts_from_the_template_as_built(g1, g1_meshes, g1_sequence)
     # A new fitter's arrays sit elsewhere in memory: numpy's sums round in the last bits with
     # their alignment (docs/point_clouds.md; measured 9e-13 rad here).
     assert np.abs(first.q - fresh.q).max() < 1e-9
+
+
+def test_a_frame_without_the_person_holds_the_last_pose(g1, g1_template, g1_sequence):
+    """A frame with (nearly) no cloud points (the person walked out of the image, or hid behind
+    something) is held: status ``held``, the last frame's fit and command, and the run goes on
+    with the next frames (fitted as ok). On the first frame there is nothing to hold: refused,
+    naming ``input.crop``."""
+    from qpretarget.cloud.em import TooFewPoints
+    from qpretarget.cloud.io import CloudSequence
+
+    seq = g1_sequence.sequence
+    frames = list(seq.frames)
+    empty = CloudFrame(np.zeros((0, 3)), t=frames[5].t)
+    frames[5] = empty
+    frames[6] = CloudFrame(frames[6].points[:3], t=frames[6].t)  # 3 points: too few too
+    cfg = {"robot": "g1", "stability": {"mode": "none"}, "calibration": {"enabled": False},
+           "input": {"points": 1500, "voxel": 0.0}}  # fmt: skip
+    rt = CloudRetargeter(cfg, robot=g1, template=g1_template)
+    traj, results = rt.run(CloudSequence(frames, sensor_position=seq.sensor_position))
+    assert [r.status for r in results[4:8]] == ["ok", "held", "held", "ok"]
+    for k in (5, 6):
+        assert np.array_equal(results[k].q_fit, results[4].q_fit)
+        assert np.array_equal(traj.q[k], traj.q[4])
+    assert all(r.status == "ok" for i, r in enumerate(results) if i not in (5, 6))
+    first = CloudSequence([empty] + list(seq.frames[1:3]), sensor_position=seq.sensor_position)
+    with pytest.raises(TooFewPoints, match=r"input\.crop.*only 0 cloud points"):
+        CloudRetargeter(cfg, robot=g1, template=g1_template).run(first)

@@ -94,3 +94,13 @@ def test_the_rendered_person_stands_on_the_floor(mocap):
     assert np.all(np.abs(window_min) < 1e-9)
     toes = [min(poser.model_keypoints(q)[f"{s}_toe"][2] for s in ("left", "right")) for q in syn.q]
     assert np.median(toes) < 0.08  # on the floor or on the balls of the feet, not in the air
+
+
+def test_noise_on_an_empty_view():
+    """Nothing in view (the person walked past the sensor): an empty cloud, no outliers and no
+    error (the outliers' box is the subject's, and there is none)."""
+    pts, out = corrupt(
+        np.zeros((0, 3)), np.zeros(3), noise=0.005, outlier_fraction=0.05,
+        rng=np.random.default_rng(0),
+    )  # fmt: skip
+    assert pts.shape == (0, 3) and out.shape == (0,)
