@@ -75,7 +75,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -854,6 +854,11 @@ class CloudRetargeter:
             return False
         self._centre_time = float(t)
         return True
+
+    def _remember(self, q: np.ndarray) -> None:
+        """Append ``q`` to the history the prediction reads (its last frames only)."""
+        self.history.append(q.copy())
+        del self.history[: -max(self.config.em.ar_window + 2, 4)]
 
     def _personalize_online(
         self,
@@ -2029,21 +2034,17 @@ class CloudRetargeter:
                 raise  # nothing to hold: the first frame must show the person
             # The person out of view (walked past the sensor, occluded): hold the last pose
             # and say so; the run goes on with the next frame that shows them.
-            self.history.append(self.history[-1].copy())
-            del self.history[: -max(self.config.em.ar_window + 2, 4)]
+            self._remember(self.history[-1])
             last = self._last
-            return FrameResult(
-                last.q_fit.copy(),
-                last.q_robot.copy(),
-                last.sigma2,
-                last.nll,
-                0,
-                last.support,
-                last.com_margin,
-                "held",
-                [],
-                time.perf_counter() - t0,
-                "",
+            return replace(
+                last,
+                q_fit=last.q_fit.copy(),
+                q_robot=last.q_robot.copy(),
+                iterations=0,
+                status="held",
+                log=[],
+                time=time.perf_counter() - t0,
+                rule="",
             )
         log: list[IterationLog] = []
         q_prev = self.history[-1] if self.history else None
@@ -2094,9 +2095,7 @@ class CloudRetargeter:
             margin = self.rows.margin_of(q, full=True)
             if margin < 0 and status == "ok" and self.stability_mode == "qp":
                 status = "relaxed"
-        self.history.append(q.copy())
-        if len(self.history) > max(em.ar_window + 2, 4):
-            self.history.pop(0)
+        self._remember(q)
         self._last = FrameResult(
             q,
             q_robot,

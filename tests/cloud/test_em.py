@@ -43,15 +43,22 @@ def test_e_step_is_eq_3_and_4():
 def frame(g1, g1_meshes):
     """One noisy G1 frame (5 mm, 5 % outliers), the truth, and a small template (the dense
     E-step is O(N M); 800 cloud and 1,500 template points keep the test short)."""
-    data = g1.model.createData()
     q = g1.q_reference.copy()
+    points, sensor = render_g1(g1, g1_meshes, q, seed=0)
+    T = Template(g1, n_points=1500, meshes=g1_meshes, link_density_exponent=0.5)
+    return points, q, sensor, T
+
+
+def render_g1(g1, g1_meshes, q: np.ndarray, *, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """G1 at ``q`` seen by the tests' half-resolution Kinect 1.8 m away (5 mm noise, 5 %
+    outliers): the cloud's points and the sensor's position."""
+    data = g1.model.createData()
     pin.forwardKinematics(g1.model, data, q)
     cam = kinect_camera([1.8, 0.3, 1.0], [0.0, 0.0, 0.65], downscale=2)
     out = render_cloud(
-        g1_meshes, data, cam, noise=0.005, outlier_fraction=0.05, rng=np.random.default_rng(0)
+        g1_meshes, data, cam, noise=0.005, outlier_fraction=0.05, rng=np.random.default_rng(seed)
     )
-    T = Template(g1, n_points=1500, meshes=g1_meshes, link_density_exponent=0.5)
-    return out["points"], q, cam.position, T
+    return out["points"], cam.position
 
 
 def fitter(g1, T, sensor, **em) -> CloudRetargeter:
@@ -366,12 +373,7 @@ def test_yaw_search_finds_a_turned_person(g1, g1_meshes, frame):
     loose)."""
     S, q, sensor, T = frame
     target = _turned(q, math.radians(120.0))
-    data = g1.model.createData()
-    pin.forwardKinematics(g1.model, data, target)
-    cam = kinect_camera([1.8, 0.3, 1.0], [0.0, 0.0, 0.65], downscale=2)
-    cloud = render_cloud(
-        g1_meshes, data, cam, noise=0.005, outlier_fraction=0.05, rng=np.random.default_rng(1)
-    )["points"]
+    cloud, _ = render_g1(g1, g1_meshes, target, seed=1)
     truth = _heading(pin.XYZQUATToSE3(target[:7]).rotation)
     err = {}
     for n in (0, 4):
@@ -419,12 +421,7 @@ def test_fit_joint_limits_narrow_the_robots(g1, g1_meshes, frame):
     iw = g1.joint_q_index[g1.joint_index("waist_yaw_joint")]
     target = q.copy()
     target[iw] = 1.2
-    data = g1.model.createData()
-    pin.forwardKinematics(g1.model, data, target)
-    cam = kinect_camera([1.8, 0.3, 1.0], [0.0, 0.0, 0.65], downscale=2)
-    cloud = render_cloud(
-        g1_meshes, data, cam, noise=0.005, outlier_fraction=0.05, rng=np.random.default_rng(2)
-    )["points"]
+    cloud, _ = render_g1(g1, g1_meshes, target, seed=2)
     waist = {}
     for bound in (None, 0.8):
         limits = {} if bound is None else {"waist_yaw_joint": [-bound, bound]}
