@@ -2528,6 +2528,11 @@ class CloudRetargeter:
             "cloud/com_margin": np.array([r.com_margin for r in results]),
             "cloud/backtracks": np.array([sum(x.backtracks for x in r.log) for r in results]),
         }
+        human_q = sequence.meta.get("human_q")  # make-cloud's truth: evaluate scores the arms
+        if human_q is not None and np.ndim(human_q) == 2 and len(human_q) >= len(results):
+            from .measures import HUMAN_Q_KEY
+
+            extra[HUMAN_Q_KEY] = np.asarray(human_q, float)[: len(results)]
         return RobotTrajectory(
             t=t,
             q=q,

@@ -17,14 +17,23 @@ go under where the person's arm is outside the robot's reach.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
 
 if TYPE_CHECKING:
     from ..robot import RobotModel
+    from ..trajectory import RobotTrajectory
     from .render import HumanPoser
+
+#: Issue 23's acceptance: every arm segment within this of the person's [deg].
+ARM_TOLERANCE_DEG = 12.0
+#: An arm segment further off than this is *lost* [deg] (issue 23: at most 0.5 s at a time).
+ARM_LOST_DEG = 45.0
+#: Run-file array of the rendered person's configurations (``make-cloud``'s ``meta/human_q``,
+#: carried over by ``retarget-cloud``), the truth :func:`run_arm_direction_errors` scores.
+HUMAN_Q_KEY = "cloud/human_q"
 
 #: Column order of :func:`arm_direction_errors`.
 ARM_SEGMENTS: tuple[str, ...] = (
@@ -78,6 +87,68 @@ def longest_run_above(errors: np.ndarray, t: np.ndarray, threshold: float) -> fl
             best = max(best, float(t[end] - t[start]) + dt)
             start = None
     return best
+
+
+def arm_direction_summary(errors: np.ndarray, t: np.ndarray) -> dict[str, Any]:
+    """The figures issue 23 and ``docs/point_clouds.md`` report of a run's arm-direction errors.
+
+    Args:
+        errors: (T, 4) from :func:`arm_direction_errors` [deg].
+        t: (T,) frame times [s].
+
+    Returns:
+        ``worst_deg`` (the largest error of any segment and frame) and ``worst_segment``,
+        ``worst_time_s``; ``per_segment_worst_deg`` (columns :data:`ARM_SEGMENTS`);
+        ``median_deg`` (over every segment and frame); ``frames_above_tolerance`` (frames whose
+        worst segment exceeds :data:`ARM_TOLERANCE_DEG`) of ``frames``; ``longest_lost_s``
+        (:func:`longest_run_above` :data:`ARM_LOST_DEG`); the two thresholds.
+    """
+    e = np.asarray(errors, float)
+    t = np.asarray(t, float)
+    if e.ndim != 2 or e.shape[1] != len(ARM_SEGMENTS) or len(t) != len(e) or not len(e):
+        raise ValueError(
+            f"need errors (T, {len(ARM_SEGMENTS)}) and t (T,) with T > 0, got {e.shape} and "
+            f"{t.shape}"
+        )
+    k, col = np.unravel_index(int(np.argmax(e)), e.shape)
+    return {
+        "worst_deg": float(e[k, col]),
+        "worst_segment": ARM_SEGMENTS[col],
+        "worst_time_s": float(t[k] - t[0]),
+        "per_segment_worst_deg": dict(zip(ARM_SEGMENTS, map(float, e.max(axis=0)), strict=True)),
+        "median_deg": float(np.median(e)),
+        "frames": len(e),
+        "frames_above_tolerance": int((e.max(axis=1) > ARM_TOLERANCE_DEG).sum()),
+        "tolerance_deg": ARM_TOLERANCE_DEG,
+        "longest_lost_s": longest_run_above(e, t, ARM_LOST_DEG),
+        "lost_deg": ARM_LOST_DEG,
+    }
+
+
+def run_arm_direction_errors(
+    traj: RobotTrajectory, robot: RobotModel | None = None
+) -> np.ndarray | None:
+    """(T, 4) arm-direction errors of a ``retarget-cloud`` run against its rendered person.
+
+    The run carries the person's configurations (:data:`HUMAN_Q_KEY`) when its clouds came from
+    ``make-cloud`` (or :func:`~qpretarget.cloud.render.human_clip_sequence`); None otherwise
+    (a real sensor's clouds have no truth to score against). ``robot``: the run's robot
+    (default: built from the run's stored config).
+    """
+    human_q = traj.extra.get(HUMAN_Q_KEY)
+    if human_q is None:
+        return None
+    human_q = np.asarray(human_q, float)
+    if human_q.shape[0] != len(traj.q):
+        raise ValueError(
+            f"{HUMAN_Q_KEY} has {human_q.shape[0]} frames, the run {len(traj.q)}: the run file "
+            "was edited; write it again with retarget-cloud"
+        )
+    from .render import HumanPoser
+
+    if robot is None:
+        robot = traj.make_controller().robot
+    return arm_direction_errors(robot, traj.q, HumanPoser(), human_q)
 
 
 def _arm_joints(robot: RobotModel, side: str) -> list[int]:
@@ -217,4 +288,14 @@ class _ArmDirections:
         return self.directions(self.config(x, q, idx, nb), group) - target
 
 
-__all__ = ["ARM_SEGMENTS", "arm_direction_bound", "arm_direction_errors", "longest_run_above"]
+__all__ = [
+    "ARM_LOST_DEG",
+    "ARM_SEGMENTS",
+    "ARM_TOLERANCE_DEG",
+    "HUMAN_Q_KEY",
+    "arm_direction_bound",
+    "arm_direction_errors",
+    "arm_direction_summary",
+    "longest_run_above",
+    "run_arm_direction_errors",
+]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from . import add_command, add_output
 
@@ -28,6 +29,9 @@ HELP = """examples:
       joints hit their torque limits, what a virtual root wrench had to add (docs/physics.md)
   qpretarget evaluate run.npz -o report/ --physics --physics-gains unitree --no-assist
       the vendor's PD gains, unassisted replay only
+
+A point-cloud run (retarget-cloud) of make-cloud's clouds is also scored against the rendered
+person: the "arm directions" line, metrics.json "cloud_arm_directions", arm_directions.png.
 
 Every run is also audited for self-collision over every body pair on the meshes, whatever the
 config or --pairs say (metrics.json "mesh_self_collision", self_collision_all_pairs.png, and the
@@ -111,10 +115,18 @@ def run(args: argparse.Namespace) -> int:
     series = compute_series(traj, pairs=pairs, safety_distance=args.safety_distance)
     metrics = summarize(series, per_frame=not args.no_per_frame)
     human, reason = human_metrics_or_reason(traj)
+    cloud_run = traj.meta.get("command") == "retarget-cloud"
+    if human is None and cloud_run:
+        reason = (
+            "a point-cloud run has no human key-points (its arms are scored against the "
+            "rendered person below when the clouds came from make-cloud)"
+        )
     metrics["human"] = human if human is not None else {"unavailable": reason}
     from ..analysis.mesh_audit import audit_lines, audit_run, plot_audit
 
-    audit = audit_run(traj.q, traj.make_controller().robot)  # every pair, whatever the config
+    robot = traj.make_controller().robot
+    arm_errors = _cloud_arms(traj, robot, metrics, per_frame=not args.no_per_frame)
+    audit = audit_run(traj.q, robot)  # every pair, whatever the config
     metrics["mesh_self_collision"] = audit.to_dict() if audit else {"unavailable": "no geometry"}
     before = None
     if args.before:
@@ -145,6 +157,10 @@ def run(args: argparse.Namespace) -> int:
         written += list(write_figures(series, out, before=before, joints=args.joints).values())
         if audit:
             written.append(plot_audit(audit, traj.t, out / "self_collision_all_pairs.png"))
+        if arm_errors is not None:
+            from ..cloud.plots import plot_arm_directions
+
+            written.append(plot_arm_directions(arm_errors, traj.t, out / "arm_directions.png"))
     _print_summary(metrics)
     print("\n".join(f"{'mesh collision' if i == 0 else '':16s} {x}"
                     for i, x in enumerate(audit_lines(audit))))  # fmt: skip
@@ -152,6 +168,43 @@ def run(args: argparse.Namespace) -> int:
         written += _physics(traj, args, out, metrics)
     print("wrote " + ", ".join(str(p) for p in written))
     return 0
+
+
+def _cloud_arms(traj: Any, robot: Any, metrics: dict, *, per_frame: bool) -> Any:
+    """A point-cloud run's arm-direction errors against its rendered person (or None).
+
+    Adds ``metrics["cloud_arm_directions"]``
+    (:func:`qpretarget.cloud.measures.arm_direction_summary`, and the (T, 4) errors per frame
+    unless ``per_frame`` is false) to a ``retarget-cloud`` run; says why when its clouds carry
+    no rendered person (a real sensor's). Other runs: nothing.
+    """
+    if traj.meta.get("command") != "retarget-cloud":
+        return None
+    from ..cloud.measures import (
+        ARM_SEGMENTS,
+        HUMAN_Q_KEY,
+        arm_direction_summary,
+        run_arm_direction_errors,
+    )
+    from ..errors import ConfigError
+
+    try:
+        errors = run_arm_direction_errors(traj, robot)
+    except ValueError as exc:
+        raise ConfigError(f"{exc}.") from None
+    if errors is None:
+        metrics["cloud_arm_directions"] = {
+            "unavailable": f"the clouds carry no rendered person ({HUMAN_Q_KEY}: make-cloud "
+            "writes it); a sensor's clouds have no truth to score the arms against"
+        }
+        return None
+    summary = arm_direction_summary(errors, traj.t)
+    if per_frame:
+        summary["per_frame_deg"] = {
+            name: [float(x) for x in errors[:, k]] for k, name in enumerate(ARM_SEGMENTS)
+        }
+    metrics["cloud_arm_directions"] = summary
+    return errors
 
 
 def _physics(traj: object, args: argparse.Namespace, out: Path, metrics: dict) -> list[Path]:
@@ -276,4 +329,15 @@ def _print_summary(m: dict) -> None:
         from ..analysis.human_metrics import format_human_metrics
 
         lines += format_human_metrics(human)
+    arms = m.get("cloud_arm_directions")
+    if arms and "unavailable" in arms:
+        lines.append(f"arm directions   not measured: {arms['unavailable']}")
+    elif arms:
+        lines.append(
+            f"arm directions   worst {arms['worst_deg']:.1f} deg "
+            f"({arms['worst_segment'].replace('_', ' ')} at {arms['worst_time_s']:.2f} s), "
+            f"median {arms['median_deg']:.1f} deg; {arms['frames_above_tolerance']} of "
+            f"{arms['frames']} frames above {arms['tolerance_deg']:g} deg; longest above "
+            f"{arms['lost_deg']:g} deg {arms['longest_lost_s']:.2f} s (vs the rendered person)"
+        )
     print("\n".join(lines))

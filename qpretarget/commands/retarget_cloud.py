@@ -76,12 +76,19 @@ def run(args: argparse.Namespace) -> int:
         camera_pose=None if inp.camera_pose is None else np.asarray(inp.camera_pose, float),
         depth_scale=inp.depth_scale,
     )
-    frames = seq.frames[_slice(args.frames)]
+    chosen = _slice(args.frames)
+    frames = seq.frames[chosen]
     if not frames:
         from ..errors import ConfigError
 
         raise ConfigError(f"no frame selected (the input has {len(seq)} frames).")
-    seq = CloudSequence(frames, seq.sensor_position, seq.source, seq.meta)
+    meta = dict(seq.meta)
+    human_q = meta.get("human_q")  # make-cloud's truth, per frame: the same frames
+    if human_q is not None and np.ndim(human_q) == 2 and len(human_q) == len(seq):
+        meta["human_q"] = np.asarray(human_q)[chosen]
+    else:
+        meta.pop("human_q", None)  # not one row per frame: nothing to score against
+    seq = CloudSequence(frames, seq.sensor_position, seq.source, meta)
     fitter = CloudRetargeter(cfg)
     traj, results = fitter.run(seq, progress=not args.no_progress)
     traj.meta["input"] = str(Path(args.input))

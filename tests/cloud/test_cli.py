@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -39,6 +41,11 @@ def test_retarget_cloud_writes_a_run(tmp_path, clouds, g1, capsys):
     assert run.extra["cloud/centres"].shape == (len(run.extra["cloud/centre_joints"]), 3)
     # The stored config rebuilds a controller (evaluate and view rely on it).
     assert run.make_controller().robot.nq == g1.nq
+    assert "cloud/human_q" not in run.extra  # G1's clouds carry no rendered person
+    assert main(["evaluate", str(out), "-o", str(tmp_path / "rep"), "--no-figures"]) == 0
+    printed = capsys.readouterr().out
+    assert "arm directions   not measured: the clouds carry no rendered person" in printed
+    assert "a point-cloud run has no human key-points" in printed
     # The robot stands on its primary sole: one sole at z = 0 in every frame (1e-9 m).
     import pinocchio as pin
 
@@ -93,6 +100,24 @@ def test_make_cloud_then_retarget_cloud(tmp_path, mocap, g1, capsys):
     traj = RobotTrajectory.load(run)
     err = arm_direction_errors(g1, traj.q, HumanPoser(), human_q)
     assert err.max() <= 12.0, np.round(err.max(axis=0), 1)
+    # The run carries the rendered person: evaluate scores its arms by the same measure
+    # (1e-9 deg: the same formula on the same configurations, round-off only).
+    assert np.array_equal(traj.extra["cloud/human_q"], human_q)
+    report = tmp_path / "report"
+    assert main(["evaluate", str(run), "-o", str(report)]) == 0
+    printed = capsys.readouterr().out
+    assert f"arm directions   worst {err.max():.1f} deg" in printed
+    arms = json.loads((report / "metrics.json").read_text())["cloud_arm_directions"]
+    assert arms["worst_deg"] == pytest.approx(err.max(), abs=1e-9)
+    assert arms["frames"] == 9 and arms["frames_above_tolerance"] == 0
+    assert np.allclose(arms["per_frame_deg"]["left_upper_arm"], err[:, 0], atol=1e-9)
+    assert (report / "arm_directions.png").stat().st_size > 0
+    # A frame range keeps the truth of those frames.
+    part = tmp_path / "part.npz"
+    assert main(["retarget-cloud", str(config), str(clouds), "-o", str(part), "--frames",
+                 "2:7", "--no-progress"]) == 0  # fmt: skip
+    capsys.readouterr()
+    assert np.array_equal(RobotTrajectory.load(part).extra["cloud/human_q"], human_q[2:7])
     # Bad input: one sentence, exit code 1.
     assert main(["make-cloud", str(tmp_path / "none.bvh"), "-o", str(clouds)]) == 1
     assert "does not exist" in capsys.readouterr().err

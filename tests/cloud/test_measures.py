@@ -5,8 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+import pytest
 
-from qpretarget.cloud.measures import arm_direction_bound, arm_direction_errors
+from qpretarget.cloud.measures import (
+    ARM_SEGMENTS,
+    arm_direction_bound,
+    arm_direction_errors,
+    arm_direction_summary,
+)
 
 
 class _RobotAsPerson:
@@ -97,3 +103,25 @@ def test_a_fold_beyond_the_arm_is_bounded(g1):
             cost += float((u - t) @ (u - t))
         best = min(best, cost)
     assert best >= bound_cost - 1e-9
+
+
+def test_arm_direction_summary():
+    """The figures of the docs, the benchmark and ``evaluate`` from (T, 4) errors, by hand."""
+    t = np.arange(10) / 10.0
+    e = np.full((10, 4), 5.0)
+    e[3, 2] = 13.0  # one frame above 12 deg: the right upper arm at 0.3 s, the worst
+    e[5:8, 1] = 46.0  # the left forearm lost for frames 5-7: 0.2 s + one period = 0.3 s
+    e[6, 1] = 50.0
+    s = arm_direction_summary(e, t + 2.0)  # times from the clip's start: relative
+    assert s["worst_deg"] == 50.0 and s["worst_segment"] == ARM_SEGMENTS[1]
+    assert s["worst_time_s"] == pytest.approx(0.6, abs=1e-12)
+    assert s["per_segment_worst_deg"] == dict(
+        zip(ARM_SEGMENTS, [5.0, 50.0, 13.0, 5.0], strict=True)
+    )
+    assert s["median_deg"] == 5.0 and s["frames"] == 10
+    assert s["frames_above_tolerance"] == 4  # frames 3, 5, 6, 7
+    assert s["longest_lost_s"] == pytest.approx(0.3, abs=1e-12)
+    with pytest.raises(ValueError, match=r"errors \(T, 4\)"):
+        arm_direction_summary(e[:, :3], t)
+    with pytest.raises(ValueError, match="T > 0"):
+        arm_direction_summary(e, t[:5])
