@@ -755,12 +755,7 @@ class CloudRetargeter:
         lo, hi = self.robot.q_min.copy(), self.robot.q_max.copy()
         model = self.robot.model
         for name, (a, b) in spec.items():
-            if not model.existJointName(name):
-                names = [n for n in model.names[1:] if model.joints[model.getJointId(n)].nq == 1]
-                raise ConfigError(
-                    f"the robot has no joint {name!r}.{close_matches_hint(name, names)}",
-                    path=f"em.joint_limits.{name}",
-                )
+            self.robot.joint_index(name, path=f"em.joint_limits.{name}")  # a joint of the robot
             iq = model.joints[model.getJointId(name)].idx_q
             if a > hi[iq] or b < lo[iq]:
                 raise ConfigError(

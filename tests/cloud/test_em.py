@@ -450,7 +450,7 @@ def test_fit_joint_limits_are_checked(g1, g1_template):
         with pytest.raises(ConfigError, match=r"em\.joint_limits"):
             CloudConfig.from_dict({"em": {"joint_limits": bad}})
     cases = {
-        "waist_yaw": r"em\.joint_limits\.waist_yaw.*no joint.*waist_yaw_joint",
+        "waist_yaw": r"em\.joint_limits\.waist_yaw.*joint 'waist_yaw' is not known.*waist_yaw_joint",
         "waist_roll_joint": r"outside the robot's range",
     }
     for name, pattern in cases.items():
