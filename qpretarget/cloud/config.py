@@ -228,13 +228,21 @@ class EMConfig:
             that did not, the frame is fitted again from the last such frame's pose and from
             the constant-velocity prediction, and the fit with the lowest NLL (eq. 3) kept.
         reinit_window: frames of the running median of sigma.
+        reinit_at_limits: joints whose fitted angle ending at the fit's limit (within
+            0.01 rad, ``em.LIMIT_MARGIN``; :attr:`joint_limits` included) also flags the
+            frame lost, whatever its sigma (``[]``: off). G1: ``[waist_yaw_joint]`` with
+            the waist bounded to a person's twist: a trunk twisted as far as a person can
+            twist is a pelvis and a torso that disagree on the heading (on CMU 17_10
+            boxing, a whip turn of 90-135 deg in 0.3 s that the pelvis followed and the
+            torso did not), and it sets off the re-initialisation, with the yaw search when
+            ``reinit_yaw_starts`` > 0.
         reinit_yaw_starts: coarse search over the trunk's yaw in a re-initialisation (0: off):
             this many extra starts on each side, the last good pose with its floating base
             turned about the vertical by ``k * reinit_yaw_step`` (k = 1..n, both signs) and the
             joints ``reinit_yaw_reset`` set to 0 (the torso's heading kept; with such joints
             the untwisted pose turned by 0 is a start too). Each gets ``reinit_yaw_iterations``
             EM iterations; the one with the lowest NLL (eq. 3) is fitted on and competes with
-            the other starts. Needs ``reinit_ratio`` > 0 (the trigger).
+            the other starts. Needs a trigger: ``reinit_ratio`` > 0 or ``reinit_at_limits``.
         reinit_yaw_step: grid step of those starts [rad].
         reinit_yaw_iterations: EM iterations of each yaw start before they are compared.
         reinit_yaw_reset: trunk joints the yaw starts set to 0, turning the base so that the
@@ -251,9 +259,9 @@ class EMConfig:
             posed with the robot's joints, and a person's trunk does not twist as far as G1's
             waist (2.6 rad): a back seen end-on explains the cloud about as well as a front,
             and on CMU 17_10 boxing the fit's waist yaw ran to G1's limit, the torso turned
-            170 deg from the person's. ``{}`` (default): the robot's limits. (A waist yaw
-            bound of +-0.8 rad, a person's axial range, was measured and not shipped:
-            docs/point_clouds.md, eighth round.)
+            170 deg from the person's. ``{}`` (default): the robot's limits.
+            ``configs/cloud_g1.yaml`` bounds the waist yaw to +-0.8 rad, a person's axial
+            range, with ``reinit_at_limits`` (docs/point_clouds.md, ninth round).
     """
 
     outlier_weight: float = 0.1
@@ -282,6 +290,7 @@ class EMConfig:
     damping: float = 1.0e-6
     reinit_ratio: float = 0.0
     reinit_window: int = 30
+    reinit_at_limits: list[str] = field(default_factory=list)
     reinit_yaw_starts: int = 0
     reinit_yaw_step: float = 0.785
     reinit_yaw_iterations: int = 10
@@ -386,7 +395,7 @@ def _section(cls: type, spec: Any, path: str) -> Any:
                     f"must be a list of [a, b, c] joint-name triples, got {value!r}.",
                     path=f"{path}.{key}",
                 )
-        elif key == "reinit_yaw_reset":
+        elif key in ("reinit_yaw_reset", "reinit_at_limits"):
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise ConfigError(
                     f"must be a list of joint names, got {value!r}.", path=f"{path}.{key}"
@@ -549,6 +558,13 @@ class CloudConfig:
                 f"at most half a turn each way), got {em.reinit_yaw_starts} * "
                 f"{em.reinit_yaw_step} rad.",
                 path="em.reinit_yaw_step",
+            )
+        if em.reinit_yaw_starts and not (em.reinit_ratio > 0 or em.reinit_at_limits):
+            raise ConfigError(
+                "the yaw search runs in a re-initialisation, which nothing triggers: set "
+                "em.reinit_ratio > 0 (a likelihood drop) or em.reinit_at_limits (a joint at "
+                "its limit), or reinit_yaw_starts: 0.",
+                path="em.reinit_yaw_starts",
             )
         if cal.centre_symmetric and cal.centre_axes != "limb":
             raise ConfigError(

@@ -118,6 +118,8 @@ CALIBRATION_SIGMA0 = 0.05
 #: A fit within this distance of a joint limit [rad] tries the other angles of its
 #: ``em.branch_joints`` triple.
 BRANCH_MARGIN = 0.01
+#: A joint of ``em.reinit_at_limits`` within this of its fit limit flags the frame lost [rad].
+LIMIT_MARGIN = 0.01
 #: The joint pose + centre iterations of a frame stop when no centre moves more than this [m]
 #: (and no joint more than ``em.tolerance``).
 CENTRE_TOLERANCE = 5.0e-4
@@ -728,6 +730,14 @@ class CloudRetargeter:
         ids = [self.model.getJointId(n) for n in names]
         self._yaw_reset = np.array([self.model.joints[j].idx_q for j in ids], dtype=int)
         self._yaw_joint = max(ids, default=0)  # the deepest: its heading is kept
+        self._limit_watch = np.array(
+            [
+                self.model.joints[self.model.getJointId(n)].idx_q
+                for n in cfg.em.reinit_at_limits
+                if self.robot.joint_index(n, path="em.reinit_at_limits") >= 0
+            ],
+            dtype=int,
+        )
         if cfg.em.reinit_yaw_starts and self.model.joints[1].nq != 7:
             raise ConfigError(
                 "the yaw search turns the floating base: the template's root must be a free-flyer.",
@@ -2069,7 +2079,7 @@ class CloudRetargeter:
         Sn = self._take_normals(Sn)
         if self._branches:
             q, sigma2, nll = self._switch_branches(S, Sn, (q, sigma2, nll), log)
-        if self._lost(sigma2):
+        if self._lost(sigma2) or self._at_limits(q):
             q, sigma2, nll = self._reinitialise(S, Sn, (q, sigma2, nll), log)
         else:
             self._sigmas.append(math.sqrt(sigma2))
@@ -2200,6 +2210,25 @@ class CloudRetargeter:
         if not em.reinit_ratio > 0 or len(self._sigmas) < 5 or self._good is None:
             return False
         return math.sqrt(sigma2) > em.reinit_ratio * float(np.median(self._sigmas))
+
+    def at_limits(self, q: np.ndarray) -> bool:
+        """Whether a joint of ``em.reinit_at_limits`` ends within ``LIMIT_MARGIN`` of its limit.
+
+        The limits are the fit's (``em.joint_limits`` within the robot's). With the waist
+        bounded to a person's twist, a fit at that bound is a pelvis and a torso that disagree
+        on the heading: a lost trunk, whatever its sigma.
+        """
+        idx = self._limit_watch
+        if not idx.size:
+            return False
+        th = q[idx]
+        return bool(
+            np.any((th - self.q_min[idx] < LIMIT_MARGIN) | (self.q_max[idx] - th < LIMIT_MARGIN))
+        )
+
+    def _at_limits(self, q: np.ndarray) -> bool:
+        """:meth:`at_limits`, once there is a good pose to re-initialise from."""
+        return self._good is not None and self.at_limits(q)
 
     def _reinitialise(
         self,

@@ -331,7 +331,7 @@ def test_yaw_starts_turn_the_trunk(g1, g1_template):
     joint set to 0, the torso's heading kept) and turn the whole robot by 0, +-45, +-90 deg
     about the vertical through the base; the base keeps its place and tilt, the other joints
     their angles. Exact geometry: checked to 1e-9."""
-    em = {"reinit_yaw_starts": 2, "reinit_yaw_step": math.pi / 4,
+    em = {"reinit_ratio": 1.2, "reinit_yaw_starts": 2, "reinit_yaw_step": math.pi / 4,
           "reinit_yaw_reset": ["waist_yaw_joint"]}  # fmt: skip
     rt = CloudRetargeter(
         {"robot": "g1", "calibration": {"enabled": False}, "em": em},
@@ -438,6 +438,56 @@ def test_fit_joint_limits_narrow_the_robots(g1, g1_meshes, frame):
             assert (rt.q_min[iw], rt.q_max[iw]) == (-0.8, 0.8)
     assert waist[None] > 1.0
     assert 0.8 - 1e-6 < waist[0.8] <= 0.8
+
+
+def test_a_waist_at_its_fit_limit_sets_off_the_reinitialisation(g1, g1_meshes, frame):
+    """``em.reinit_at_limits``: a fit ending with a watched joint at its fit limit is treated
+    as lost, whatever its sigma: the frame is fitted again (the re-initialisation's stages
+    in its log) and the kept fit has an NLL no larger than the first. The scene of the test
+    above: G1's waist turned 1.2 rad, the fit's range [-0.8, 0.8], so the fit ends on the
+    bound. Without the option (and no sigma trigger) no frame is fitted again."""
+    _, q, sensor, T = frame
+    iw = g1.joint_q_index[g1.joint_index("waist_yaw_joint")]
+    target = q.copy()
+    target[iw] = 1.2
+    cloud, _ = render_g1(g1, g1_meshes, target, seed=2)
+    out = {}
+    for watch in ([], ["waist_yaw_joint"]):
+        rt = fitter(g1, T, sensor, estep="kdtree", joint_limits={"waist_yaw_joint": [-0.8, 0.8]},
+                    reinit_at_limits=watch)  # fmt: skip
+        start = target.copy()
+        start[iw] = 0.6
+        assert not rt.at_limits(start)
+        rt.history, rt._good = [start, start.copy()], start.copy()  # still so far
+        out[bool(watch)] = rt.fit(CloudFrame(cloud))
+        assert rt.at_limits(out[bool(watch)].q_fit) == bool(watch)  # unwatched: never
+    assert not any(x.stage.startswith("reinit") for x in out[False].log)
+    stages = {x.stage for x in out[True].log}
+    assert {"reinit-last-linear", "reinit-velocity-linear"} <= stages
+    assert out[True].nll <= out[False].nll
+    # The first frame has no good pose to start from: not flagged there.
+    rt = fitter(g1, T, sensor, joint_limits={"waist_yaw_joint": [-0.8, 0.8]},
+                reinit_at_limits=["waist_yaw_joint"])  # fmt: skip
+    assert rt.at_limits(out[True].q_fit) and not rt._at_limits(out[True].q_fit)
+
+
+def test_reinit_at_limits_is_checked(g1, g1_template):
+    """An unknown joint, or a yaw search nothing triggers, is refused with its path."""
+    from qpretarget.cloud.config import CloudConfig
+    from qpretarget.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"em\.reinit_yaw_starts.*nothing triggers"):
+        CloudConfig.from_dict({"em": {"reinit_yaw_starts": 1}})
+    CloudConfig.from_dict({"em": {"reinit_yaw_starts": 1, "reinit_at_limits": ["a"]}})
+    with pytest.raises(ConfigError, match=r"em\.reinit_at_limits"):
+        CloudConfig.from_dict({"em": {"reinit_at_limits": "waist_yaw_joint"}})
+    with pytest.raises(ConfigError, match=r"em\.reinit_at_limits.*waist_yaw_joint"):
+        CloudRetargeter(
+            {"robot": "g1", "calibration": {"enabled": False},
+             "em": {"reinit_at_limits": ["waist_yaw"]}},
+            robot=g1,
+            template=g1_template,
+        )  # fmt: skip
 
 
 def test_fit_joint_limits_are_checked(g1, g1_template):
