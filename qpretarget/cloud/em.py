@@ -730,14 +730,11 @@ class CloudRetargeter:
         ids = [self.model.getJointId(n) for n in names]
         self._yaw_reset = np.array([self.model.joints[j].idx_q for j in ids], dtype=int)
         self._yaw_joint = max(ids, default=0)  # the deepest: its heading is kept
-        self._limit_watch = np.array(
-            [
-                self.model.joints[self.model.getJointId(n)].idx_q
-                for n in cfg.em.reinit_at_limits
-                if self.robot.joint_index(n, path="em.reinit_at_limits") >= 0
-            ],
-            dtype=int,
-        )
+        watch = []
+        for n in cfg.em.reinit_at_limits:
+            self.robot.joint_index(n, path="em.reinit_at_limits")  # a clear error if unknown
+            watch.append(self.model.joints[self.model.getJointId(n)].idx_q)
+        self._limit_watch = np.array(watch, dtype=int)  # their coordinates in q
         if cfg.em.reinit_yaw_starts and self.model.joints[1].nq != 7:
             raise ConfigError(
                 "the yaw search turns the floating base: the template's root must be a free-flyer.",
@@ -2238,6 +2235,9 @@ class CloudRetargeter:
         log: list[IterationLog],
     ) -> tuple[np.ndarray, float, float]:
         """Fit the frame again from other starts; keep the lowest NLL (issue 23 item 2).
+
+        Called on a frame flagged lost: its sigma well above the recent frames'
+        (``em.reinit_ratio``) or a joint of ``em.reinit_at_limits`` at its fit limit.
 
         Starts: the pose of the last frame that was not lost (the fit may have drifted since)
         and the constant-velocity prediction (a fast limb the auto-regression lags behind).
