@@ -411,23 +411,35 @@ def test_yaw_search_is_checked(g1, g1_template):
         )
 
 
-def test_fit_joint_limits_narrow_the_robots(g1, g1_meshes, frame):
+def _waist_at(q: np.ndarray, iw: int, angle: float) -> np.ndarray:
+    out = q.copy()
+    out[iw] = angle
+    return out
+
+
+@pytest.fixture(scope="module")
+def turned_waist(g1, g1_meshes, frame):
+    """G1 at the test frame's pose with its waist yaw at 1.2 rad (within G1's 2.6, past a
+    person's 0.8), rendered: (waist coordinate, configuration, cloud)."""
+    iw = g1.joint_q_index[g1.joint_index("waist_yaw_joint")]
+    target = _waist_at(frame[1], iw, 1.2)
+    cloud, _ = render_g1(g1, g1_meshes, target, seed=2)
+    return iw, target, cloud
+
+
+def test_fit_joint_limits_narrow_the_robots(g1, frame, turned_waist):
     """``em.joint_limits``: the fit's range of a joint, inside the robot's. G1 rendered with its
     waist turned 1.2 rad (within G1's 2.6), the fit started at 0.6: with the robot's range the
     waist goes well past 0.8 (measured 1.09 rad in the test's 15 iterations), with [-0.8, 0.8]
     it ends on that bound (never past it: the QP's bounds and the clip; 1e-6 below it, the
     solver's tolerance, measured 3e-8); every other joint keeps the robot's range."""
-    _, q, sensor, T = frame
-    iw = g1.joint_q_index[g1.joint_index("waist_yaw_joint")]
-    target = q.copy()
-    target[iw] = 1.2
-    cloud, _ = render_g1(g1, g1_meshes, target, seed=2)
+    _, _, sensor, T = frame
+    iw, target, cloud = turned_waist
     waist = {}
     for bound in (None, 0.8):
         limits = {} if bound is None else {"waist_yaw_joint": [-bound, bound]}
         rt = fitter(g1, T, sensor, estep="kdtree", joint_limits=limits)
-        start = target.copy()
-        start[iw] = 0.6
+        start = _waist_at(target, iw, 0.6)
         rt.history, rt._good = [start], start.copy()
         waist[bound] = rt.fit(CloudFrame(cloud)).q_fit[iw]
         if bound is not None:
@@ -440,23 +452,19 @@ def test_fit_joint_limits_narrow_the_robots(g1, g1_meshes, frame):
     assert 0.8 - 1e-6 < waist[0.8] <= 0.8
 
 
-def test_a_waist_at_its_fit_limit_sets_off_the_reinitialisation(g1, g1_meshes, frame):
+def test_a_waist_at_its_fit_limit_sets_off_the_reinitialisation(g1, frame, turned_waist):
     """``em.reinit_at_limits``: a fit ending with a watched joint at its fit limit is treated
     as lost, whatever its sigma: the frame is fitted again (the re-initialisation's stages
     in its log) and the kept fit has an NLL no larger than the first. The scene of the test
     above: G1's waist turned 1.2 rad, the fit's range [-0.8, 0.8], so the fit ends on the
     bound. Without the option (and no sigma trigger) no frame is fitted again."""
-    _, q, sensor, T = frame
-    iw = g1.joint_q_index[g1.joint_index("waist_yaw_joint")]
-    target = q.copy()
-    target[iw] = 1.2
-    cloud, _ = render_g1(g1, g1_meshes, target, seed=2)
+    _, _, sensor, T = frame
+    iw, target, cloud = turned_waist
     out = {}
     for watch in ([], ["waist_yaw_joint"]):
         rt = fitter(g1, T, sensor, estep="kdtree", joint_limits={"waist_yaw_joint": [-0.8, 0.8]},
                     reinit_at_limits=watch)  # fmt: skip
-        start = target.copy()
-        start[iw] = 0.6
+        start = _waist_at(target, iw, 0.6)
         assert not rt.at_limits(start)
         rt.history, rt._good = [start, start.copy()], start.copy()  # still so far
         out[bool(watch)] = rt.fit(CloudFrame(cloud))
