@@ -16,7 +16,8 @@ clips stay within 12 deg on every run. Renderings are cached (``--cache``): the 
 length and render seed are rendered once.
 
     python scripts/cloud_accuracy.py                       # six clips x template seeds 0-2, 3 s
-    python scripts/cloud_accuracy.py --clips boxing --frames 300 --render-seeds 0 1 2
+    python scripts/cloud_accuracy.py --render-seeds 0 1 2  # x three renderings (the docs' 54)
+    python scripts/cloud_accuracy.py --clips boxing --frames 300 --render-seeds 0 1 2 3 4
     python scripts/cloud_accuracy.py --clips chicken reach --set em.reinit_ratio=0 \\
         --set "em.joint_limits={}"                         # a setting against the shipped one
 """

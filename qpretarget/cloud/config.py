@@ -219,6 +219,12 @@ class EMConfig:
             at the previous pass's fit (the first pass uses the predicted pose).
         occlusion_cell: also leave out template points hidden behind other parts, by a point
             z-buffer of this cell size [m] (0: off).
+        occlusion_confirm: leave such a point out only when the frame's cloud confirms the
+            occlusion, i.e. shows a surface in front of it (a cloud point in its angular cell
+            nearer to the sensor by more than ``2 occlusion_cell``). Without one, the
+            template part in the way is not where the person's is (the trunk behind a fitted
+            arm the person holds elsewhere, a leg behind the other), and the point takes part.
+            Needs ``cull_backfaces`` and ``occlusion_cell > 0``.
         prediction: ``ar3`` (third-order auto-regression, V.B), ``velocity`` (constant
             velocity: the last frame-to-frame step repeated) or ``constant`` (the last pose).
         ar_window: frames used to fit the auto-regression.
@@ -284,6 +290,7 @@ class EMConfig:
     overrelaxation: float = 1.8
     cull_backfaces: bool = True
     occlusion_cell: float = 0.02
+    occlusion_confirm: bool = False
     visibility_passes: int = 1
     prediction: str = "ar3"
     ar_window: int = 10
@@ -565,6 +572,13 @@ class CloudConfig:
                 "em.reinit_ratio > 0 (a likelihood drop) or em.reinit_at_limits (a joint at "
                 "its limit), or reinit_yaw_starts: 0.",
                 path="em.reinit_yaw_starts",
+            )
+        if em.occlusion_confirm and not (em.cull_backfaces and em.occlusion_cell > 0):
+            raise ConfigError(
+                "confirms the template's own occlusions, which are off: set "
+                "em.cull_backfaces: true and em.occlusion_cell > 0 (0.02 m), or "
+                "occlusion_confirm: false.",
+                path="em.occlusion_confirm",
             )
         if cal.centre_symmetric and cal.centre_axes != "limb":
             raise ConfigError(

@@ -484,14 +484,13 @@ def _same_array(kept: np.ndarray | None, a: Any) -> bool:
     return bool(kept.shape == a.shape and np.array_equal(kept, a))
 
 
-def visible_from(
-    points: np.ndarray, eye: np.ndarray, cell: float, depth_tolerance: float | None = None
-) -> np.ndarray:
-    """Points not hidden behind others as seen from ``eye``: a point z-buffer on angular cells.
+def _angular_cells(
+    points: np.ndarray, eye: np.ndarray, cell: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distance from ``eye`` (n,) and angular cell index (n,) of each point.
 
-    Directions are binned in cells of ``cell`` metres at the points' median distance; in each
-    cell, points deeper than the nearest one by more than ``depth_tolerance`` (default
-    ``2 cell``) are hidden.
+    Directions are binned in cells of ``cell`` metres at the points' median distance (azimuth
+    scaled by the cosine of the median elevation, so cells are about square).
     """
     d = points - eye
     r = np.linalg.norm(d, axis=1)
@@ -503,10 +502,45 @@ def visible_from(
     cv = np.floor(el / ang).astype(np.int64)
     key = (cu - cu.min()) * (cv.max() - cv.min() + 1) + (cv - cv.min())
     _, inv = np.unique(key, return_inverse=True)
+    return r, inv
+
+
+def visible_from(
+    points: np.ndarray, eye: np.ndarray, cell: float, depth_tolerance: float | None = None
+) -> np.ndarray:
+    """Points not hidden behind others as seen from ``eye``: a point z-buffer on angular cells.
+
+    Directions are binned in cells of ``cell`` metres at the points' median distance; in each
+    cell, points deeper than the nearest one by more than ``depth_tolerance`` (default
+    ``2 cell``) are hidden.
+    """
+    r, inv = _angular_cells(points, eye, cell)
     front = np.full(int(inv.max()) + 1, np.inf)
     np.minimum.at(front, inv, r)
     tol = 2.0 * cell if depth_tolerance is None else depth_tolerance
     return r <= front[inv] + tol
+
+
+def behind_cloud(
+    points: np.ndarray,
+    cloud: np.ndarray,
+    eye: np.ndarray,
+    cell: float,
+    depth_tolerance: float | None = None,
+) -> np.ndarray:
+    r"""Points the ``cloud`` shows a surface in front of, as seen from ``eye``.
+
+    Points and cloud are binned together in the angular cells of :func:`visible_from`; a point
+    is behind the cloud when a cloud point of its cell is nearer to ``eye`` by more than
+    ``depth_tolerance`` (default ``2 cell``): :math:`r_m > \min_{n \in c(m)} r_n + \tau`.
+    A point whose cell holds no cloud point (the sensor saw past it) is not behind.
+    """
+    m = len(points)
+    r, inv = _angular_cells(np.vstack([points, cloud]), eye, cell)
+    front = np.full(int(inv.max()) + 1, np.inf)
+    np.minimum.at(front, inv[m:], r[m:])
+    tol = 2.0 * cell if depth_tolerance is None else depth_tolerance
+    return r[:m] > front[inv[:m]] + tol
 
 
 def _other_angles(th: np.ndarray) -> np.ndarray:
@@ -816,6 +850,7 @@ class CloudRetargeter:
         self._personal_time: float | None = None  # ... and with online personalisation
         self.personalized_online = 0  # cloud points the template took while tracking
         self._sub: np.ndarray | None = None  # the frame's visible template points (_pose)
+        self._frame_cloud: np.ndarray | None = None  # the frame's cloud (em.occlusion_confirm)
         self._sigmas: list[float] = []  # sigma of the last frames that were not lost
         self._good: np.ndarray | None = None  # the last such frame's fit
         self._last: FrameResult | None = None  # the last frame fitted (what a held one keeps)
@@ -966,6 +1001,22 @@ class CloudRetargeter:
         self._sub = np.flatnonzero(visible)
         return np.ones(len(self._sub), bool)
 
+    def visible(self, q: np.ndarray, cloud: np.ndarray | None = None) -> np.ndarray:
+        """(M,) the template points that take part in a fit at pose ``q`` against ``cloud``.
+
+        Those facing the sensor (``em.cull_backfaces``) and not hidden behind another part of
+        the template (``em.occlusion_cell``); with ``em.occlusion_confirm`` and a ``cloud``
+        (N, 3), a hidden point takes part all the same when the cloud shows no surface in
+        front of it (:func:`behind_cloud`). The sensor's position is the one of the last
+        :meth:`fit` (or set ``sensor_position``); without one every point takes part.
+        """
+        kept = self._frame_cloud
+        self._frame_cloud = None if cloud is None else np.asarray(cloud, float).reshape(-1, 3)
+        try:
+            return self._active(self.template.pose(np.asarray(q, float), jacobians=False))
+        finally:
+            self._frame_cloud = kept
+
     def _active(self, posed: PosedTemplate) -> np.ndarray:
         """Template points the sensor can see: facing it, and not behind another part."""
         em = self.config.em
@@ -974,7 +1025,14 @@ class CloudRetargeter:
         view = posed.points - self.sensor_position
         active = np.einsum("ma,ma->m", posed.normals, view) < 0.0
         if em.occlusion_cell > 0:
-            active &= visible_from(posed.points, self.sensor_position, em.occlusion_cell)
+            seen = visible_from(posed.points, self.sensor_position, em.occlusion_cell)
+            if em.occlusion_confirm and self._frame_cloud is not None:
+                # Hidden by the template, but the cloud shows nothing in front: the part in
+                # the way is not where the person's is, and the point takes part.
+                seen |= ~behind_cloud(
+                    posed.points, self._frame_cloud, self.sensor_position, em.occlusion_cell
+                )
+            active &= seen
         return active
 
     def _prior(self, q: np.ndarray, q_prev: np.ndarray | None) -> float:
@@ -1511,6 +1569,7 @@ class CloudRetargeter:
         by ``calibration.scale_bounds``; left and right segments share one scale.
         """
         cal, em = self.config.calibration, self.config.em
+        self._frame_cloud = S  # what the template's occlusions are checked against
         T = self.template
         T.set_scales(np.ones(len(T.segment_names)), np.zeros_like(T.centre_offsets))
         q = self.robot.q_reference.copy()
@@ -2031,6 +2090,7 @@ class CloudRetargeter:
         self._normals_job, self._frame_normals = None, None
         try:
             S, Sn = self._prepare(frame, index)
+            self._frame_cloud = S
         except TooFewPoints:
             if not (self.calibrated and self.history and self._last is not None):
                 raise  # nothing to hold: the first frame must show the person
