@@ -112,6 +112,12 @@ class CalibrationConfig:
             points ``personalize_rate`` may replace; ``null``: all of them. The shipped config
             takes the trunk's alone: the trunk's heading is what the worst arm frames were made
             of, while the limbs, personalised too, moved the fit's arms further off.
+        rigid_segments: template segments made one rigid body after the calibration: their
+            points on joints inside the segment ride with the segment's first joint
+            (:meth:`~qpretarget.cloud.template.Template.attach_rigidly`). G1's torso segment
+            holds its shoulder-pitch links, which carry the person's chest and shoulder surface
+            after the calibration and would swing it about with the arms' pitch. The shipped
+            config: ``[torso]``.
         posture_weight: :math:`\lambda_p` on the squared joint change from the calibration
             posture (``initial_joints``) while calibrating (0: off).
         joint_centres: go on estimating where the subject's joint centres sit in the template
@@ -161,6 +167,7 @@ class CalibrationConfig:
     personalize_distance: float = 0.025
     personalize_rate: float = 0.0
     personalize_segments: list[str] | None = None
+    rigid_segments: list[str] = field(default_factory=list)
     posture_weight: float = 1000.0
     joint_centres: bool = True
     centre_joints: list[str] | None = None
@@ -435,6 +442,12 @@ def _section(cls: type, spec: Any, path: str) -> Any:
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise ConfigError(
                     f"must be a list of segment names or null, got {value!r}.",
+                    path=f"{path}.{key}",
+                )
+        elif key == "rigid_segments":
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise ConfigError(
+                    f"must be a list of segment names (e.g. [torso]), got {value!r}.",
                     path=f"{path}.{key}",
                 )
         elif key == "centre_joints" and value is not None:

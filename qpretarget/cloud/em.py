@@ -748,6 +748,9 @@ class CloudRetargeter:
         self._qi, self._vi = qi, vi
         self.q_min, self.q_max = self._fit_limits(cfg.em.joint_limits)
         self._personal_segments = self._segment_ids(cfg.calibration.personalize_segments)
+        self._rigid_segments = self._segment_ids(
+            cfg.calibration.rigid_segments, path="calibration.rigid_segments"
+        )
         lo, hi = self.q_min[qi], self.q_max[qi]
         self._bounded = np.isfinite(lo) & np.isfinite(hi)
         self._sole_ids = {f: self.model.getFrameId(d.frame) for f, d in self.robot.feet.items()}
@@ -781,6 +784,8 @@ class CloudRetargeter:
         #: Template points moved to the segment on their side of a person's centre at the
         #: calibration (``calibration.centre_cuts``).
         self.recut_points = 0
+        #: Template points ``calibration.rigid_segments`` moved to their segment's first joint.
+        self.rigid_points = 0
         # The template as built: every run (reset) starts from it, not from the surface the
         # previous subject left (calibration and online personalisation change it).
         self._template_state = self.template.surface_state()
@@ -807,8 +812,10 @@ class CloudRetargeter:
             lo[iq], hi[iq] = max(lo[iq], a), min(hi[iq], b)
         return lo, hi
 
-    def _segment_ids(self, names: list[str] | None) -> np.ndarray | None:
-        """Indices of the template segments ``names`` (``calibration.personalize_segments``).
+    def _segment_ids(
+        self, names: list[str] | None, path: str = "calibration.personalize_segments"
+    ) -> np.ndarray | None:
+        """Indices of the template segments ``names`` (the config key ``path``).
 
         Raises:
             ConfigError: a name that is not one of the template's segments.
@@ -821,7 +828,7 @@ class CloudRetargeter:
                 raise ConfigError(
                     f"no template segment {n!r}.{close_matches_hint(n, known)} "
                     f"Segments: {', '.join(known)}.",
-                    path="calibration.personalize_segments",
+                    path=path,
                 )
         return np.array([known.index(n) for n in names], dtype=int)
 
@@ -1641,6 +1648,8 @@ class CloudRetargeter:
             if cal.centre_cuts == "centres":
                 # The limbs' surfaces cut at the person's centres, not the robot's links.
                 self.recut_points = T.assign_by_centres(q, reach=cal.centre_bound)
+        if self._rigid_segments is not None and len(self._rigid_segments):
+            self.rigid_points = T.attach_rigidly(q, list(self._rigid_segments))
         self._centre_info = np.eye(nc) / max(cal.centre_prior, 1e-9) ** 2
         self.calibration_sigma2 = sigma2
         self.calibrated = True

@@ -708,7 +708,7 @@ class Template:
             The number of points moved to another joint.
         """
         posed = self.pose(q, jacobians=False)
-        w, nw, p, R = posed.points, posed.normals, posed.p, posed.R
+        w, p = posed.points, posed.p
         seg = self.seg_of_joint
         trunk = [k for k, n in enumerate(self.segment_names) if n in (ROOT_SEGMENT, "torso")]
         joint = self.joint.copy()
@@ -726,9 +726,41 @@ class Template:
             near = (np.abs(s) <= reach) & (radial <= reach)
             joint[near & (s > 0) & (seg[self.joint] == seg[above])] = own
             joint[near & (s < 0) & (seg[self.joint] == seg[own])] = above
+        return self._reattach(posed, joint)
+
+    def attach_rigidly(self, q: np.ndarray, segments: list[int]) -> int:
+        r"""Make each of ``segments`` one rigid body: its points ride with its first joint.
+
+        A segment runs from the joint that starts it (:func:`segments_of_joints`) down to the
+        next key-point; the joints in between move parts of it. G1's torso segment holds its
+        shoulder-pitch links, which turn with the arms' pitch: after the calibration they carry
+        the person's chest and shoulder surface (:meth:`personalize`), and a raised arm then
+        swings that surface about, which pulls the fit's torso and the shoulders' centre
+        estimate (docs/point_clouds.md, *Ninth* and *Tenth rounds*). At ``q`` (the
+        calibrated pose) every point of a segment in ``segments`` on a joint :math:`j` that is
+        not the segment's first joint :math:`j_0` is attached to :math:`j_0`, its position and
+        normal at ``q`` kept (new local coordinates in :math:`j_0`'s frame).
+
+        Returns:
+            The number of points moved to another joint.
+        """
+        seg = self.seg_of_joint
+        first = np.arange(len(seg))  # each joint's first joint of its segment (left, right apart)
+        for j in range(1, len(seg)):  # parents come first
+            parent = int(self._parents[j])
+            if parent > 0 and seg[parent] == seg[j]:
+                first[j] = first[parent]
+        rigid = np.isin(seg[self.joint], segments)
+        joint = np.where(rigid, first[self.joint], self.joint)
+        return self._reattach(self.pose(q, jacobians=False), joint)
+
+    def _reattach(self, posed: PosedTemplate, joint: np.ndarray) -> int:
+        """Attach the points to ``joint`` (M,), keeping their place and normal at ``posed``."""
         moved = np.flatnonzero(joint != self.joint)
         if len(moved) == 0:
             return 0
+        w, nw, p, R = posed.points, posed.normals, posed.p, posed.R
+        seg = self.seg_of_joint
         j = joint[moved]
         e_loc = np.einsum("kba,kb->ka", self._R0[j], self.centre_offsets[j])
         local = np.einsum("kba,kb->ka", R[j], w[moved] - p[j])

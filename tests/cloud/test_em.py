@@ -579,6 +579,15 @@ def test_personalize_segments_are_checked(g1, g1_template):
             robot=g1,
             template=g1_template,
         )
+    # calibration.rigid_segments likewise, under its own path.
+    with pytest.raises(ConfigError, match=r"calibration\.rigid_segments.*\[torso\]"):
+        CloudConfig.from_dict({"calibration": {"rigid_segments": "torso"}})
+    with pytest.raises(ConfigError, match=r"calibration\.rigid_segments.*'torsoo'.*'torso'"):
+        CloudRetargeter(
+            {"robot": "g1", "calibration": {"rigid_segments": ["torsoo"]}},
+            robot=g1,
+            template=g1_template,
+        )
 
 
 def test_contact_height_releases_raised_soles(g1, frame):

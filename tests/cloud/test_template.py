@@ -300,3 +300,49 @@ def test_personalize_more_takes_the_newly_seen_surface(g1, g1_meshes):
         assert np.min(cKDTree(new).query(posed.points[left])[0]) > 0.025
     # Nothing in view that is still the robot's: nothing to take.
     assert T.personalize_more(q, P, N, np.zeros(T.n_points, bool), max_distance=0.025) == 0
+
+
+def test_attach_rigidly_makes_a_segment_one_body(g1, g1_meshes):
+    """``attach_rigidly``: the torso's points on G1's shoulder-pitch links ride with the torso.
+
+    At the calibrated pose nothing moves (1e-9 m: a change of frames, round-off only); with the
+    shoulders pitched those points stay where the torso carries them, where before they turned
+    with the arms. A segment shared by both sides (``upper_arm``) keeps each side's points on
+    its own side: every point goes to its own joint or an ancestor of it.
+    """
+    T = Template(g1, n_points=1500, meshes=g1_meshes, link_density_exponent=0.5, seed=3)
+    model = T.model
+    q0 = g1.q_reference.copy()
+    pitched = q0.copy()
+    for side in ("left", "right"):
+        pitched[g1.joint_q_index[g1.joint_index(f"{side}_shoulder_pitch_joint")]] = -1.0
+    torso = T.segment_names.index("torso")
+    pitch = [model.getJointId(f"{s}_shoulder_pitch_joint") for s in ("left", "right")]
+    on_pitch = np.isin(T.joint, pitch) & (T.point_segment == torso)
+    assert on_pitch.sum() > 20  # the premise: G1's torso segment has shoulder-pitch points
+    before = T.pose(q0, jacobians=False).points.copy()
+    swung = T.pose(pitched, jacobians=False).points[on_pitch].copy()
+    key = np.lexsort(before.T)  # the re-attachment reorders the points: compare as sets
+
+    assert T.attach_rigidly(q0, [torso]) == on_pitch.sum()
+    assert not np.isin(T.joint[T.point_segment == torso], pitch).any()
+    after = T.pose(q0, jacobians=False).points
+    assert np.abs(after[np.lexsort(after.T)] - before[key]).max() < 1e-9
+    # Pitched arms: the former shoulder-pitch points are where the unpitched torso has them.
+    waist = model.getJointId("waist_pitch_joint")
+    moved = T.joint == waist
+    rigid = T.pose(pitched, jacobians=False).points[moved]
+    still = T.pose(q0, jacobians=False).points[moved]
+    assert np.abs(rigid - still).max() < 1e-9  # the arms' pitch moves no torso point now
+    assert np.abs(swung - before[on_pitch]).max() > 0.02  # ... where it moved them 2+ cm
+
+    T2 = Template(g1, n_points=1500, meshes=g1_meshes, link_density_exponent=0.5, seed=3)
+    count = {n: int((T2.joint == model.getJointId(n)).sum()) for n in model.names[1:]}
+    T2.attach_rigidly(q0, [T2.segment_names.index("upper_arm")])
+    for side in ("left", "right"):
+        roll, yaw = (model.getJointId(f"{side}_shoulder_{n}_joint") for n in ("roll", "yaw"))
+        assert count[f"{side}_shoulder_yaw_joint"] > 0
+        assert not (T2.joint == yaw).any()
+        assert (T2.joint == roll).sum() == (
+            count[f"{side}_shoulder_roll_joint"] + count[f"{side}_shoulder_yaw_joint"]
+        )
