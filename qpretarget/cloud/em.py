@@ -1017,15 +1017,19 @@ class CloudRetargeter:
         front of it (:func:`behind_cloud`). The sensor's position is the one of the last
         :meth:`fit` (or set ``sensor_position``); without one every point takes part.
         """
-        kept = self._frame_cloud
-        self._frame_cloud = None if cloud is None else np.asarray(cloud, float).reshape(-1, 3)
-        try:
-            return self._active(self.template.pose(np.asarray(q, float), jacobians=False))
-        finally:
-            self._frame_cloud = kept
+        S = None if cloud is None else np.asarray(cloud, float).reshape(-1, 3)
+        return self._visible(self.template.pose(np.asarray(q, float), jacobians=False), S)
 
     def _active(self, posed: PosedTemplate) -> np.ndarray:
-        """Template points the sensor can see: facing it, and not behind another part."""
+        """:meth:`_visible` against the frame being fitted (its cloud, ``_frame_cloud``)."""
+        return self._visible(posed, self._frame_cloud)
+
+    def _visible(self, posed: PosedTemplate, cloud: np.ndarray | None) -> np.ndarray:
+        """Template points the sensor can see: facing it, and not behind another part.
+
+        With ``em.occlusion_confirm``, a hidden point counts as seen when ``cloud`` shows no
+        surface in front of it (:func:`behind_cloud`).
+        """
         em = self.config.em
         if not em.cull_backfaces or self.sensor_position is None:
             return np.ones(self.template.n_points, bool)
@@ -1033,12 +1037,10 @@ class CloudRetargeter:
         active = np.einsum("ma,ma->m", posed.normals, view) < 0.0
         if em.occlusion_cell > 0:
             seen = visible_from(posed.points, self.sensor_position, em.occlusion_cell)
-            if em.occlusion_confirm and self._frame_cloud is not None:
+            if em.occlusion_confirm and cloud is not None:
                 # Hidden by the template, but the cloud shows nothing in front: the part in
                 # the way is not where the person's is, and the point takes part.
-                seen |= ~behind_cloud(
-                    posed.points, self._frame_cloud, self.sensor_position, em.occlusion_cell
-                )
+                seen |= ~behind_cloud(posed.points, cloud, self.sensor_position, em.occlusion_cell)
             active &= seen
         return active
 
