@@ -232,6 +232,18 @@ class EMConfig:
             template part in the way is not where the person's is (the trunk behind a fitted
             arm the person holds elsewhere, a leg behind the other), and the point takes part.
             Needs ``cull_backfaces`` and ``occlusion_cell > 0``.
+        silhouette_weight: :math:`\lambda_s`, the pull on template points outside the
+            person's silhouette during the refinement (0: off; not in Wang 2017, whose
+            mixture leaves a template point no cloud point is near free): a point taking part
+            around whose ray the sensor saw nothing, or saw past it by more than 15 cm, is
+            pulled across the image onto the nearest cloud point's ray at its own distance,
+            with the weight of this many cloud points
+            (:class:`qpretarget.cloud.em.Silhouette`; docs/point_clouds.md, eleventh
+            round). Needs ``refine_iterations > 0`` and a sensor position.
+        silhouette_segments: the template segments whose points the silhouette pulls
+            (``null``: all, as shipped). Leaving out the shanks and feet, whose supporting
+            soles the contact term holds, was measured and not kept (docs/point_clouds.md,
+            eleventh round).
         prediction: ``ar3`` (third-order auto-regression, V.B), ``velocity`` (constant
             velocity: the last frame-to-frame step repeated) or ``constant`` (the last pose).
         ar_window: frames used to fit the auto-regression.
@@ -298,6 +310,8 @@ class EMConfig:
     cull_backfaces: bool = True
     occlusion_cell: float = 0.02
     occlusion_confirm: bool = False
+    silhouette_weight: float = 0.0
+    silhouette_segments: list[str] | None = None
     visibility_passes: int = 1
     prediction: str = "ar3"
     ar_window: int = 10
@@ -592,6 +606,12 @@ class CloudConfig:
                 "em.cull_backfaces: true and em.occlusion_cell > 0 (0.02 m), or "
                 "occlusion_confirm: false.",
                 path="em.occlusion_confirm",
+            )
+        if em.silhouette_weight > 0 and em.refine_iterations == 0:
+            raise ConfigError(
+                "the silhouette pulls act in the refinement stage, which is off: set "
+                "em.refine_iterations > 0 (3), or silhouette_weight: 0.",
+                path="em.silhouette_weight",
             )
         if cal.centre_symmetric and cal.centre_axes != "limb":
             raise ConfigError(

@@ -61,6 +61,13 @@ position error at :math:`\lambda_\perp = 0.5`. Here the normals are scaled by th
 ``normal_scale`` :math:`\ell` (default 5 cm, which makes both terms of the same order for a
 1 cm fit and normals estimated within about 20 deg).
 
+**Silhouette pulls** (not in the paper; ``em.silhouette_weight`` :math:`\lambda_s`): in the
+refinement, template points taking part that lie outside the person's silhouette
+(:class:`Silhouette`) add :math:`\lambda_s \sum_{m \in O} \|v_m - t_m\|^2` to the bracket of
+Q (as :math:`\lambda_s` cloud points each, towards targets :math:`t_m` on the outline held for
+the iteration like the posteriors), so the acceptance rule and the M-step take them; the
+:math:`\sigma^2` update leaves them out.
+
 **Initialization** (V.B): a third-order auto-regression of the previous poses (an AR(2) on the
 frame-to-frame steps, i.e. an AR(3) on poses whose coefficients sum to one), its two coefficients
 fitted by ridge least squares over the last ``ar_window`` frames pooled over the joints.
@@ -123,6 +130,142 @@ LIMIT_MARGIN = 0.01
 #: The joint pose + centre iterations of a frame stop when no centre moves more than this [m]
 #: (and no joint more than ``em.tolerance``).
 CENTRE_TOLERANCE = 5.0e-4
+#: A template point is outside the person's silhouette when the sensor saw past it by more
+#: than this [m] (or saw nothing) around its ray (``em.silhouette_weight``).
+SILHOUETTE_DEPTH = 0.15
+#: Cloud points searched for the nearest one at or in front of such a point's depth.
+SILHOUETTE_NEIGHBOURS = 16
+
+
+# ------------------------------------------------------------------------------ silhouette
+@dataclass
+class SilhouettePulls:
+    r"""Pulls on the template points outside the person's silhouette (:class:`Silhouette`).
+
+    :math:`\lambda_s \sum_{m \in O} \|v_m - t_m\|^2` over the points O outside (indices
+    ``idx`` into the posed points) towards their targets ``targets`` (|O|, 3), in the units
+    of the M-step's bracket (:meth:`EStep.bracket`: a pulled point weighs as ``weight`` cloud
+    points all assigned to it).
+    """
+
+    idx: np.ndarray
+    targets: np.ndarray
+    weight: float
+
+    def bracket(self, v: np.ndarray) -> float:
+        r""":math:`\lambda_s \sum_{m \in O} \|v_m - t_m\|^2` at the posed points ``v``."""
+        if not len(self.idx):
+            return 0.0
+        d = v[self.idx] - self.targets
+        return float(self.weight * np.einsum("ma,ma->", d, d))
+
+    def add_to(self, P1: np.ndarray, E: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r"""``P1`` and ``E`` of :meth:`Template.normal_equations` with the pulls added.
+
+        :math:`P_m \mathrel{+}= \lambda_s`, :math:`e_m \mathrel{+}= \lambda_s (t_m - v_m)`.
+        """
+        if not len(self.idx):
+            return P1, E
+        P1, E = P1.copy(), E.copy()
+        P1[self.idx] += self.weight
+        E[self.idx] += self.weight * (self.targets - v[self.idx])
+        return P1, E
+
+
+class Silhouette:
+    r"""The person's silhouette as the sensor saw it in one frame's cloud.
+
+    Wang 2017's mixture (eq. 1) has the template points as its centres: a centre no cloud point
+    is near costs nothing, so a template part that sticks out of the person's outline (a trunk
+    turned wider than the person's, an arm put where the sensor saw past) is not pulled back.
+    Depth trackers add a free-space term for that (Ganapathi et al., ECCV 2012; Schmidt et
+    al., DART, RSS 2014); this is its outline half. A template point that takes part is
+    *outside* when no cloud point of its angular cell or the 8 around it lies nearer than
+    :math:`r_m + d_s` (``SILHOUETTE_DEPTH``, 15 cm) from the sensor: there the sensor saw
+    nothing, or saw well past the point. It is pulled across the image, at its own distance
+    :math:`r_m`, onto the ray of the nearest cloud point (in the image) that lies at or in
+    front of its depth (:math:`r_n \le r_m + 2\,\mathrm{cell}`; among the
+    ``SILHOUETTE_NEIGHBOURS`` nearest, else the nearest):
+    :math:`t_m = e + r_m (s_n - e) / \|s_n - e\|`.
+
+    The other half, pushing a point that lies in front of a surface the sensor saw just behind
+    it back onto that surface, was measured and is left out (docs/point_clouds.md, *Eleventh
+    round*). Cells are ``cell`` metres at the cloud's median distance from ``eye`` (as
+    :func:`visible_from`, azimuths taken about the cloud's mean direction); template points
+    below ``floor`` (where the crop cut the floor, and the person's soles with it) are not
+    pulled.
+    """
+
+    def __init__(self, cloud: np.ndarray, eye: np.ndarray, cell: float, floor: float) -> None:
+        self.eye = np.asarray(eye, float)
+        self.cell = float(cell)
+        self.floor = float(floor)
+        self.cloud = np.asarray(cloud, float)
+        d = self.cloud - self.eye
+        r = np.linalg.norm(d, axis=1)
+        self.r_med = float(np.median(r))
+        mean = d.mean(axis=0)
+        self.az0 = math.atan2(float(mean[1]), float(mean[0]))  # azimuths about it (no seam)
+        el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
+        self.cos_el = math.cos(float(np.median(el)))
+        uv = self.image(d, r)
+        ij = np.floor(uv / self.cell).astype(np.int64)
+        self.lo = ij.min(axis=0) - 1
+        shape = tuple(int(x) for x in ij.max(axis=0) - self.lo + 2)
+        front = np.full(shape, np.inf)
+        np.minimum.at(front, (ij[:, 0] - self.lo[0], ij[:, 1] - self.lo[1]), r)
+        # The nearest surface over each cell and the 8 around it.
+        pad = np.pad(front, 1, constant_values=np.inf)
+        near = pad[1:-1, 1:-1].copy()
+        for a in (0, 1, 2):
+            for b in (0, 1, 2):
+                np.minimum(near, pad[a : a + shape[0], b : b + shape[1]], out=near)
+        self.front = near
+        self._uv = uv
+        self._r = r
+        self._tree: Any = None
+
+    def image(self, d: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """(n, 2) image coordinates [m at the median distance] of directions ``d`` (n, 3)."""
+        az = _wrap_near(np.arctan2(d[:, 1], d[:, 0]) - self.az0, np.zeros(1))
+        el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
+        return np.stack([az * self.cos_el * self.r_med, el * self.r_med], axis=1)
+
+    def outside(self, v: np.ndarray) -> np.ndarray:
+        """(n,) whether each point of ``v`` (n, 3) is outside the silhouette (floor excepted)."""
+        d = v - self.eye
+        r = np.linalg.norm(d, axis=1)
+        return self._outside(self.image(d, r), r) & (v[:, 2] > self.floor)
+
+    def _outside(self, uv: np.ndarray, r: np.ndarray) -> np.ndarray:
+        ij = np.floor(uv / self.cell).astype(np.int64) - self.lo
+        inside = np.all((ij >= 0) & (ij < np.array(self.front.shape)), axis=1)
+        front = np.full(len(r), np.inf)
+        front[inside] = self.front[ij[inside, 0], ij[inside, 1]]
+        return front > r + SILHOUETTE_DEPTH
+
+    def pulls(self, v: np.ndarray, points: np.ndarray, weight: float) -> SilhouettePulls:
+        """The pulls on the template ``points`` (indices into ``v``, the (M, 3) posed points)."""
+        idx = points[v[points, 2] > self.floor]
+        d = v[idx] - self.eye
+        r = np.linalg.norm(d, axis=1)
+        uv = self.image(d, r)
+        out = np.flatnonzero(self._outside(uv, r))
+        targets = np.empty((len(out), 3))
+        if len(out):
+            if self._tree is None:
+                from scipy.spatial import cKDTree
+
+                self._tree = cKDTree(self._uv)
+            k = min(SILHOUETTE_NEIGHBOURS, len(self._uv))
+            _, j = self._tree.query(uv[out], k=k)
+            j = j.reshape(len(out), k)
+            ok = self._r[j] <= (r[out] + 2.0 * self.cell)[:, None]
+            first = np.where(ok.any(axis=1), ok.argmax(axis=1), 0)
+            ray = self.cloud[j[np.arange(len(out)), first]] - self.eye
+            ray /= np.linalg.norm(ray, axis=1)[:, None]
+            targets = self.eye + ray * r[out][:, None]
+        return SilhouettePulls(idx[out], targets, weight)
 
 
 # ------------------------------------------------------------------------------ E-step
@@ -152,8 +295,9 @@ class EStep:
     normal_weight: float
     normal_scale: float = 1.0
     pairs: np.ndarray | None = None
+    silhouette: SilhouettePulls | None = None
 
-    def bracket(self, posed: PosedTemplate) -> float:
+    def bracket(self, posed: PosedTemplate, *, silhouette: bool = True) -> float:
         r"""Weighted squared residuals at the template ``posed`` (sufficient statistics).
 
         :math:`\sum_{n,m} p_{mn} (\|s_n - v_m\|^2 + \lambda_\perp \|s^\perp_n - v^\perp_m\|^2)`.
@@ -171,6 +315,8 @@ class EStep:
                 - 2.0 * np.einsum("ma,ma->", n, self.Pn)
                 + np.einsum("m,ma,ma->", self.P1, n, n)
             )
+        if silhouette and self.silhouette is not None:
+            out += self.silhouette.bracket(v)
         return float(out)
 
     def q_value(self, posed: PosedTemplate, sigma2: float) -> float:
@@ -179,7 +325,7 @@ class EStep:
 
     def sigma2_update(self, posed: PosedTemplate) -> float:
         r"""Minimiser of :meth:`q_value` over :math:`\sigma^2` at ``posed``."""
-        return self.bracket(posed) / (self.dim * max(self.Np, 1e-300))
+        return self.bracket(posed, silhouette=False) / (self.dim * max(self.Np, 1e-300))
 
 
 def e_step(
@@ -751,6 +897,9 @@ class CloudRetargeter:
         self._rigid_segments = self._segment_ids(
             cfg.calibration.rigid_segments, path="calibration.rigid_segments"
         )
+        self._silhouette_segments = self._segment_ids(
+            cfg.em.silhouette_segments, path="em.silhouette_segments"
+        )
         lo, hi = self.q_min[qi], self.q_max[qi]
         self._bounded = np.isfinite(lo) & np.isfinite(hi)
         self._sole_ids = {f: self.model.getFrameId(d.frame) for f, d in self.robot.feet.items()}
@@ -858,6 +1007,7 @@ class CloudRetargeter:
         self.personalized_online = 0  # cloud points the template took while tracking
         self._sub: np.ndarray | None = None  # the frame's visible template points (_pose)
         self._frame_cloud: np.ndarray | None = None  # the frame's cloud (em.occlusion_confirm)
+        self._silhouette: Silhouette | None = None  # its outline (em.silhouette_weight)
         self._sigmas: list[float] = []  # sigma of the last frames that were not lost
         self._good: np.ndarray | None = None  # the last such frame's fit
         self._last: FrameResult | None = None  # the last frame fitted (what a held one keeps)
@@ -1043,6 +1193,34 @@ class CloudRetargeter:
                 seen |= ~behind_cloud(posed.points, cloud, self.sensor_position, em.occlusion_cell)
             active &= seen
         return active
+
+    def _pulled(self, active: np.ndarray) -> np.ndarray:
+        """Indices of the posed points the silhouette may pull.
+
+        The ``active`` ones of the ``em.silhouette_segments`` (all segments when null).
+        """
+        idx = np.flatnonzero(active)
+        if self._silhouette_segments is None:
+            return idx
+        T = self.template
+        of = idx if self._sub is None else self._sub[idx]  # template point of each posed one
+        return idx[np.isin(T.point_segment[of], self._silhouette_segments)]
+
+    def silhouette(self, cloud: np.ndarray) -> Silhouette | None:
+        """The :class:`Silhouette` of ``cloud`` (N, 3) the fit pulls by (``em.silhouette_weight``).
+
+        Cells of ``em.occlusion_cell`` (2 cm if 0); points within one cell above the crop's
+        floor are not pulled. None without a sensor position.
+        """
+        if self.sensor_position is None:
+            return None
+        em = self.config.em
+        crop = self.config.input.crop
+        cell = em.occlusion_cell if em.occlusion_cell > 0 else 0.02
+        floor = (crop["min"][2] if crop is not None else -np.inf) + cell
+        return Silhouette(
+            np.asarray(cloud, float).reshape(-1, 3), self.sensor_position, cell, floor
+        )
 
     def _prior(self, q: np.ndarray, q_prev: np.ndarray | None) -> float:
         r"""Penalties added to the EM objective: :math:`\lambda_r E_r + \lambda_c E_c`."""
@@ -1257,8 +1435,14 @@ class CloudRetargeter:
         iterations: int,
         log: list[IterationLog],
         neighbours: _Neighbours | None = None,
+        *,
+        silhouette: bool = False,
     ) -> tuple[np.ndarray, float, float]:
-        """EM iterations of one stage (``neighbours``: kd-tree pairs shared with other stages)."""
+        """EM iterations of one stage (``neighbours``: kd-tree pairs shared with other stages).
+
+        ``silhouette``: with the pulls of the points outside the frame's silhouette
+        (``em.silhouette_weight``, :class:`Silhouette`) added to the M-steps' objective.
+        """
         em = self.config.em
         T = self.template
         lam = em.normal_weight if stage == "refine" else 0.0
@@ -1283,8 +1467,14 @@ class CloudRetargeter:
             J6 = T.joint_jacobians()
             E = est.Px - est.P1[:, None] * posed.points
             En = None if est.Pn is None else est.Pn / ell - est.P1[:, None] * posed.normals
+            P1 = est.P1
+            if silhouette and self._silhouette is not None:
+                est.silhouette = self._silhouette.pulls(
+                    posed.points, self._pulled(active), em.silhouette_weight
+                )
+                P1, E = est.silhouette.add_to(P1, E, posed.points)
             H, b = T.normal_equations(
-                posed, J6, est.P1, E, normal_weight=lam * ell * ell, P1n=est.P1, En=En
+                posed, J6, P1, E, normal_weight=lam * ell * ell, P1n=est.P1, En=En
             )
             prior0 = self._prior(q, q_prev)
             obj0 = est.q_value(posed, sigma2) + prior0
@@ -2102,6 +2292,7 @@ class CloudRetargeter:
         try:
             S, Sn = self._prepare(frame, index)
             self._frame_cloud = S
+            self._silhouette = self.silhouette(S) if self.config.em.silhouette_weight > 0 else None
         except TooFewPoints:
             if not (self.calibrated and self.history and self._last is not None):
                 raise  # nothing to hold: the first frame must show the person
@@ -2159,6 +2350,13 @@ class CloudRetargeter:
         if self.stability_mode == "hip_offset":
             self.rows.set_support(support, q)
             q, rule = hip_offset_rule(self.rows, q, self._hips, self._hip_memory)
+        if self.stability_mode == "qp" and support.feet:
+            # The stages keep the CoM over the polygon of the soles where the frame started;
+            # a fit that moved the soles can end with the CoM just outside their polygon:
+            # the smallest joint change puts it back, as at the frame's start.
+            self.rows.set_support(support, q)
+            if self.rows.margin_of(q, full=True) < 0:
+                q, _ = self._restore_balance(q)
         q_robot = self.robot_configuration(q, support)
         if self.stability_mode != "none":
             self._update_anchors(q, support)
@@ -2244,7 +2442,16 @@ class CloudRetargeter:
             Sn = self._take_normals(Sn)
         if refine and em.refine_iterations and Sn is not None:
             q, sigma2, _ = self._em_stage(
-                tag + "refine", S, Sn, q, sigma2, q_prev, active, em.refine_iterations, log
+                tag + "refine",
+                S,
+                Sn,
+                q,
+                sigma2,
+                q_prev,
+                active,
+                em.refine_iterations,
+                log,
+                silhouette=True,
             )
         return q, sigma2, nll
 
