@@ -282,6 +282,9 @@ class EStep:
         Np: :math:`N_P = \sum_{n,m} p_{mn}`.
         dim: 3 (positions) or 6 (positions and normals).
         normal_weight: :math:`\lambda_\perp` of the normal stage (0 otherwise).
+        silhouette: the pulls of the points outside the silhouette in a refinement iteration
+            (``em.silhouette_weight``): in :meth:`bracket`, so in Q and the acceptance rule,
+            but not in the :math:`\sigma^2` update.
     """
 
     nll: float
