@@ -846,3 +846,24 @@ def test_silhouette_weight_is_checked():
     with pytest.raises(ConfigError, match=r"em\.silhouette_weight.*>= 0"):
         CloudConfig.from_dict({"em": {"silhouette_weight": -1.0}})
     CloudConfig.from_dict({"em": {"silhouette_weight": 2.0}})
+
+
+def test_silhouette_segments(g1, frame):
+    """``em.silhouette_segments`` picks the segments the silhouette pulls: an unknown name is
+    refused with its close match, and only the named segments' points are pulled."""
+    from qpretarget.errors import ConfigError
+
+    _, _, sensor, T = frame
+    with pytest.raises(ConfigError, match=r"em\.silhouette_segments.*'torsoo'.*'torso'"):
+        fitter(g1, T, sensor, silhouette_segments=["torsoo"])
+    names = T.segment_names
+    every = fitter(g1, T, sensor)._pulled(np.ones(T.n_points, bool))
+    assert len(every) == T.n_points
+    arms = fitter(g1, T, sensor, silhouette_segments=["forearm", "hand"])
+    some = np.zeros(T.n_points, bool)
+    some[::2] = True
+    idx = arms._pulled(some)
+    want = np.flatnonzero(
+        some & np.isin(T.point_segment, [names.index("forearm"), names.index("hand")])
+    )
+    assert np.array_equal(idx, want) and len(want) > 0
