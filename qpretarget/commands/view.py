@@ -72,8 +72,14 @@ def run(args: argparse.Namespace) -> int:
     if not path.exists():
         raise ConfigError(f"{args.input!r} does not exist.")
     viewer = build_viewer(path, host=args.host, port=args.port, strict_port=args.strict_port)
-    print(f"qpretarget view: {path.name} on {viewer.url}  (Ctrl-C to stop)")
-    if args.open:
-        webbrowser.open(viewer.url)
-    viewer.serve_forever()
+    try:
+        # From here on the page is served: a Ctrl-C stops it cleanly, also one that comes
+        # before serve_forever's own handler is in place (a loaded machine gets there late).
+        print(f"qpretarget view: {path.name} on {viewer.url}  (Ctrl-C to stop)")
+        if args.open:
+            webbrowser.open(viewer.url)
+        viewer.serve_forever()
+    except KeyboardInterrupt:
+        print("\nqpretarget view: stopping (Ctrl-C).")
+        viewer.close()
     return 0
