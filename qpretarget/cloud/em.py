@@ -114,6 +114,7 @@ from .stability import (
     hip_offset_rule,
 )
 from .template import PosedTemplate, Template
+from .visibility import Silhouette, SilhouettePulls, behind_cloud, visible_from
 
 LOG_2PI = math.log(2.0 * math.pi)
 #: Length [m] dividing a supporting sole's slip in the contact term (``em.contact_weight``).
@@ -130,142 +131,6 @@ LIMIT_MARGIN = 0.01
 #: The joint pose + centre iterations of a frame stop when no centre moves more than this [m]
 #: (and no joint more than ``em.tolerance``).
 CENTRE_TOLERANCE = 5.0e-4
-#: A template point is outside the person's silhouette when the sensor saw past it by more
-#: than this [m] (or saw nothing) around its ray (``em.silhouette_weight``).
-SILHOUETTE_DEPTH = 0.15
-#: Cloud points searched for the nearest one at or in front of such a point's depth.
-SILHOUETTE_NEIGHBOURS = 16
-
-
-# ------------------------------------------------------------------------------ silhouette
-@dataclass
-class SilhouettePulls:
-    r"""Pulls on the template points outside the person's silhouette (:class:`Silhouette`).
-
-    :math:`\lambda_s \sum_{m \in O} \|v_m - t_m\|^2` over the points O outside (indices
-    ``idx`` into the posed points) towards their targets ``targets`` (|O|, 3), in the units
-    of the M-step's bracket (:meth:`EStep.bracket`: a pulled point weighs as ``weight`` cloud
-    points all assigned to it).
-    """
-
-    idx: np.ndarray
-    targets: np.ndarray
-    weight: float
-
-    def bracket(self, v: np.ndarray) -> float:
-        r""":math:`\lambda_s \sum_{m \in O} \|v_m - t_m\|^2` at the posed points ``v``."""
-        if not len(self.idx):
-            return 0.0
-        d = v[self.idx] - self.targets
-        return float(self.weight * np.einsum("ma,ma->", d, d))
-
-    def add_to(self, P1: np.ndarray, E: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        r"""``P1`` and ``E`` of :meth:`Template.normal_equations` with the pulls added.
-
-        :math:`P_m \mathrel{+}= \lambda_s`, :math:`e_m \mathrel{+}= \lambda_s (t_m - v_m)`.
-        """
-        if not len(self.idx):
-            return P1, E
-        P1, E = P1.copy(), E.copy()
-        P1[self.idx] += self.weight
-        E[self.idx] += self.weight * (self.targets - v[self.idx])
-        return P1, E
-
-
-class Silhouette:
-    r"""The person's silhouette as the sensor saw it in one frame's cloud.
-
-    Wang 2017's mixture (eq. 1) has the template points as its centres: a centre no cloud point
-    is near costs nothing, so a template part that sticks out of the person's outline (a trunk
-    turned wider than the person's, an arm put where the sensor saw past) is not pulled back.
-    Depth trackers add a free-space term for that (Ganapathi et al., ECCV 2012; Schmidt et
-    al., DART, RSS 2014); this is its outline half. A template point that takes part is
-    *outside* when no cloud point of its angular cell or the 8 around it lies nearer than
-    :math:`r_m + d_s` (``SILHOUETTE_DEPTH``, 15 cm) from the sensor: there the sensor saw
-    nothing, or saw well past the point. It is pulled across the image, at its own distance
-    :math:`r_m`, onto the ray of the nearest cloud point (in the image) that lies at or in
-    front of its depth (:math:`r_n \le r_m + 2\,\mathrm{cell}`; among the
-    ``SILHOUETTE_NEIGHBOURS`` nearest, else the nearest):
-    :math:`t_m = e + r_m (s_n - e) / \|s_n - e\|`.
-
-    The other half, pushing a point that lies in front of a surface the sensor saw just behind
-    it back onto that surface, was measured and is left out (docs/point_clouds.md, *Eleventh
-    round*). Cells are ``cell`` metres at the cloud's median distance from ``eye`` (as
-    :func:`visible_from`, azimuths taken about the cloud's mean direction); template points
-    below ``floor`` (where the crop cut the floor, and the person's soles with it) are not
-    pulled.
-    """
-
-    def __init__(self, cloud: np.ndarray, eye: np.ndarray, cell: float, floor: float) -> None:
-        self.eye = np.asarray(eye, float)
-        self.cell = float(cell)
-        self.floor = float(floor)
-        self.cloud = np.asarray(cloud, float)
-        d = self.cloud - self.eye
-        r = np.linalg.norm(d, axis=1)
-        self.r_med = float(np.median(r))
-        mean = d.mean(axis=0)
-        self.az0 = math.atan2(float(mean[1]), float(mean[0]))  # azimuths about it (no seam)
-        el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
-        self.cos_el = math.cos(float(np.median(el)))
-        uv = self.image(d, r)
-        ij = np.floor(uv / self.cell).astype(np.int64)
-        self.lo = ij.min(axis=0) - 1
-        shape = tuple(int(x) for x in ij.max(axis=0) - self.lo + 2)
-        front = np.full(shape, np.inf)
-        np.minimum.at(front, (ij[:, 0] - self.lo[0], ij[:, 1] - self.lo[1]), r)
-        # The nearest surface over each cell and the 8 around it.
-        pad = np.pad(front, 1, constant_values=np.inf)
-        near = pad[1:-1, 1:-1].copy()
-        for a in (0, 1, 2):
-            for b in (0, 1, 2):
-                np.minimum(near, pad[a : a + shape[0], b : b + shape[1]], out=near)
-        self.front = near
-        self._uv = uv
-        self._r = r
-        self._tree: Any = None
-
-    def image(self, d: np.ndarray, r: np.ndarray) -> np.ndarray:
-        """(n, 2) image coordinates [m at the median distance] of directions ``d`` (n, 3)."""
-        az = _wrap_near(np.arctan2(d[:, 1], d[:, 0]) - self.az0, np.zeros(1))
-        el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
-        return np.stack([az * self.cos_el * self.r_med, el * self.r_med], axis=1)
-
-    def outside(self, v: np.ndarray) -> np.ndarray:
-        """(n,) whether each point of ``v`` (n, 3) is outside the silhouette (floor excepted)."""
-        d = v - self.eye
-        r = np.linalg.norm(d, axis=1)
-        return self._outside(self.image(d, r), r) & (v[:, 2] > self.floor)
-
-    def _outside(self, uv: np.ndarray, r: np.ndarray) -> np.ndarray:
-        ij = np.floor(uv / self.cell).astype(np.int64) - self.lo
-        inside = np.all((ij >= 0) & (ij < np.array(self.front.shape)), axis=1)
-        front = np.full(len(r), np.inf)
-        front[inside] = self.front[ij[inside, 0], ij[inside, 1]]
-        return front > r + SILHOUETTE_DEPTH
-
-    def pulls(self, v: np.ndarray, points: np.ndarray, weight: float) -> SilhouettePulls:
-        """The pulls on the template ``points`` (indices into ``v``, the (M, 3) posed points)."""
-        idx = points[v[points, 2] > self.floor]
-        d = v[idx] - self.eye
-        r = np.linalg.norm(d, axis=1)
-        uv = self.image(d, r)
-        out = np.flatnonzero(self._outside(uv, r))
-        targets = np.empty((len(out), 3))
-        if len(out):
-            if self._tree is None:
-                from scipy.spatial import cKDTree
-
-                self._tree = cKDTree(self._uv)
-            k = min(SILHOUETTE_NEIGHBOURS, len(self._uv))
-            _, j = self._tree.query(uv[out], k=k)
-            j = j.reshape(len(out), k)
-            ok = self._r[j] <= (r[out] + 2.0 * self.cell)[:, None]
-            first = np.where(ok.any(axis=1), ok.argmax(axis=1), 0)
-            ray = self.cloud[j[np.arange(len(out)), first]] - self.eye
-            ray /= np.linalg.norm(ray, axis=1)[:, None]
-            targets = self.eye + ray * r[out][:, None]
-        return SilhouettePulls(idx[out], targets, weight)
 
 
 # ------------------------------------------------------------------------------ E-step
@@ -631,65 +496,6 @@ def _same_array(kept: np.ndarray | None, a: Any) -> bool:
         return kept is None and a is None
     a = np.asarray(a)
     return bool(kept.shape == a.shape and np.array_equal(kept, a))
-
-
-def _angular_cells(
-    points: np.ndarray, eye: np.ndarray, cell: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Distance from ``eye`` (n,) and angular cell index (n,) of each point.
-
-    Directions are binned in cells of ``cell`` metres at the points' median distance (azimuth
-    scaled by the cosine of the median elevation, so cells are about square).
-    """
-    d = points - eye
-    r = np.linalg.norm(d, axis=1)
-    r_med = float(np.median(r))
-    ang = cell / max(r_med, 1e-6)
-    az = np.arctan2(d[:, 1], d[:, 0])
-    el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
-    cu = np.floor(az * np.cos(np.median(el)) / ang).astype(np.int64)
-    cv = np.floor(el / ang).astype(np.int64)
-    key = (cu - cu.min()) * (cv.max() - cv.min() + 1) + (cv - cv.min())
-    _, inv = np.unique(key, return_inverse=True)
-    return r, inv
-
-
-def visible_from(
-    points: np.ndarray, eye: np.ndarray, cell: float, depth_tolerance: float | None = None
-) -> np.ndarray:
-    """Points not hidden behind others as seen from ``eye``: a point z-buffer on angular cells.
-
-    Directions are binned in cells of ``cell`` metres at the points' median distance; in each
-    cell, points deeper than the nearest one by more than ``depth_tolerance`` (default
-    ``2 cell``) are hidden.
-    """
-    r, inv = _angular_cells(points, eye, cell)
-    front = np.full(int(inv.max()) + 1, np.inf)
-    np.minimum.at(front, inv, r)
-    tol = 2.0 * cell if depth_tolerance is None else depth_tolerance
-    return r <= front[inv] + tol
-
-
-def behind_cloud(
-    points: np.ndarray,
-    cloud: np.ndarray,
-    eye: np.ndarray,
-    cell: float,
-    depth_tolerance: float | None = None,
-) -> np.ndarray:
-    r"""Points the ``cloud`` shows a surface in front of, as seen from ``eye``.
-
-    Points and cloud are binned together in the angular cells of :func:`visible_from`; a point
-    is behind the cloud when a cloud point of its cell is nearer to ``eye`` by more than
-    ``depth_tolerance`` (default ``2 cell``): :math:`r_m > \min_{n \in c(m)} r_n + \tau`.
-    A point whose cell holds no cloud point (the sensor saw past it) is not behind.
-    """
-    m = len(points)
-    r, inv = _angular_cells(np.vstack([points, cloud]), eye, cell)
-    front = np.full(int(inv.max()) + 1, np.inf)
-    np.minimum.at(front, inv[m:], r[m:])
-    tol = 2.0 * cell if depth_tolerance is None else depth_tolerance
-    return r[:m] > front[inv[:m]] + tol
 
 
 def _other_angles(th: np.ndarray) -> np.ndarray:

@@ -696,7 +696,7 @@ def test_visible_from_and_behind_cloud():
     A near patch 2 m away hides the far patch 0.5 m behind it; a patch off to the side hides
     nothing. Tolerance: 2 cells (4 cm) of depth, as the fit uses them.
     """
-    from qpretarget.cloud.em import behind_cloud, visible_from
+    from qpretarget.cloud.visibility import behind_cloud, visible_from
 
     yz = np.stack(np.meshgrid(np.linspace(-0.2, 0.2, 21), np.linspace(-0.2, 0.2, 21)), -1)
     yz = yz.reshape(-1, 2)
@@ -768,7 +768,7 @@ def test_silhouette_outside_and_pulls():
     it (seen past by more than 15 cm). Points below the floor are never pulled. The pull of a
     point beside the patch goes across the image onto the outline at the point's own distance.
     """
-    from qpretarget.cloud.em import Silhouette
+    from qpretarget.cloud.visibility import Silhouette
 
     yz = np.stack(np.meshgrid(np.linspace(-0.2, 0.2, 41), np.linspace(0.8, 1.2, 41)), -1)
     cloud = np.column_stack([np.full(41 * 41, -2.0), yz.reshape(-1, 2)])
@@ -801,7 +801,7 @@ def test_silhouette_outside_and_pulls():
 def test_silhouette_across_the_azimuth_seam():
     """A sensor looking along -x sees a person at azimuth +-180 deg: the image has no seam
     there (the azimuths are taken about the cloud's mean direction)."""
-    from qpretarget.cloud.em import Silhouette
+    from qpretarget.cloud.visibility import Silhouette
 
     yz = np.stack(np.meshgrid(np.linspace(-0.2, 0.2, 41), np.linspace(0.8, 1.2, 41)), -1)
     cloud = np.column_stack([np.full(41 * 41, -2.0), yz.reshape(-1, 2)])
