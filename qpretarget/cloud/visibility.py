@@ -179,37 +179,31 @@ class Silhouette:
         """(n,) whether each point of ``v`` (n, 3) is outside the silhouette (floor excepted)."""
         d = v - self.eye
         r = np.linalg.norm(d, axis=1)
-        return self._outside(self.image(d, r), r) & (v[:, 2] > self.floor)
-
-    def _outside(self, uv: np.ndarray, r: np.ndarray) -> np.ndarray:
-        ij = np.floor(uv / self.cell).astype(np.int64) - self.lo
+        ij = np.floor(self.image(d, r) / self.cell).astype(np.int64) - self.lo
         inside = np.all((ij >= 0) & (ij < np.array(self.front.shape)), axis=1)
         front = np.full(len(r), np.inf)
         front[inside] = self.front[ij[inside, 0], ij[inside, 1]]
-        return front > r + SILHOUETTE_DEPTH
+        return (front > r + SILHOUETTE_DEPTH) & (v[:, 2] > self.floor)
 
     def pulls(self, v: np.ndarray, points: np.ndarray, weight: float) -> SilhouettePulls:
         """The pulls on the template ``points`` (indices into ``v``, the (M, 3) posed points)."""
-        idx = points[v[points, 2] > self.floor]
+        idx = points[self.outside(v[points])]
+        if not len(idx):
+            return SilhouettePulls(idx, np.empty((0, 3)), weight)
+        if self._tree is None:
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(self._uv)
         d = v[idx] - self.eye
         r = np.linalg.norm(d, axis=1)
-        uv = self.image(d, r)
-        out = np.flatnonzero(self._outside(uv, r))
-        targets = np.empty((len(out), 3))
-        if len(out):
-            if self._tree is None:
-                from scipy.spatial import cKDTree
-
-                self._tree = cKDTree(self._uv)
-            k = min(SILHOUETTE_NEIGHBOURS, len(self._uv))
-            _, j = self._tree.query(uv[out], k=k)
-            j = j.reshape(len(out), k)
-            ok = self._r[j] <= (r[out] + 2.0 * self.cell)[:, None]
-            first = np.where(ok.any(axis=1), ok.argmax(axis=1), 0)
-            ray = self.cloud[j[np.arange(len(out)), first]] - self.eye
-            ray /= np.linalg.norm(ray, axis=1)[:, None]
-            targets = self.eye + ray * r[out][:, None]
-        return SilhouettePulls(idx[out], targets, weight)
+        k = min(SILHOUETTE_NEIGHBOURS, len(self._uv))
+        _, j = self._tree.query(self.image(d, r), k=k)
+        j = j.reshape(len(idx), k)
+        ok = self._r[j] <= (r + 2.0 * self.cell)[:, None]
+        first = np.where(ok.any(axis=1), ok.argmax(axis=1), 0)
+        ray = self.cloud[j[np.arange(len(idx)), first]] - self.eye
+        ray /= np.linalg.norm(ray, axis=1)[:, None]
+        return SilhouettePulls(idx, self.eye + ray * r[:, None], weight)
 
 
 def _wrap(x: np.ndarray) -> np.ndarray:
