@@ -273,6 +273,20 @@ class EMConfig:
         reinit_yaw_reset: trunk joints the yaw starts set to 0, turning the base so that the
             last one's heading is kept (G1: ``[waist_yaw_joint]``: a trunk twisted to the
             waist's limit is untwisted).
+        reinit_recentre: the re-initialisation's starts from the last good pose (the last
+            frame not flagged lost, and the yaw search's around it) have their floating base
+            moved horizontally to where the frame's own fit stands: the person may have walked
+            on since (33 cm over CMU 17_10 boxing's whip turn; ``false``: stop 42's starts).
+        reinit_release_contacts: the yaw search runs without the supporting soles' anchors
+            (``contact_anchor``), and a winning start's soles are anchored anew where it puts
+            them: a whip turn pivots on the feet, and the anchors, where the lost fit put
+            the soles, held every turned start back (``false``: stop 42's search).
+        reinit_limit_penalty: :math:`\rho` [nats per cloud point]: the re-initialisation
+            ranks its fits by NLL (eq. 3) plus :math:`\rho N` for a fit ending at a limit of
+            ``reinit_at_limits``, the rule that flagged the frame lost
+            (``CloudRetargeter.reinit_cost``; 0: by NLL alone, stop 42). Over boxing's 15
+            ten-second runs, 0.02-0.2 all kept the trunk through the whip turns better than
+            0 (docs/point_clouds.md, twelfth round).
         branch_joints: triples of joint names ``[a, b, c]``, each a chain of three revolute
             joints with mutually orthogonal axes (a shoulder's pitch, roll, yaw): when a fit
             leaves one of them within ``BRANCH_MARGIN`` of a limit, the frame is fitted again
@@ -323,6 +337,9 @@ class EMConfig:
     reinit_yaw_step: float = 0.785
     reinit_yaw_iterations: int = 10
     reinit_yaw_reset: list[str] = field(default_factory=list)
+    reinit_recentre: bool = True
+    reinit_release_contacts: bool = True
+    reinit_limit_penalty: float = 0.05
     branch_joints: list[list[str]] = field(default_factory=list)
     joint_limits: dict[str, list[float]] = field(default_factory=dict)
 

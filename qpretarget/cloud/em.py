@@ -2328,15 +2328,23 @@ class CloudRetargeter:
 
         Starts: the pose of the last frame that was not lost (the fit may have drifted since)
         and the constant-velocity prediction (a fast limb the auto-regression lags behind).
-        Each runs the linear and refinement stages (no centre stage: the joint-centre estimate
-        learns from tracked frames only), its temporal term towards its own start. The fits
-        are compared by the NLL of eq. 3 on the same cloud, each with its own sigma^2. With
+        With ``em.reinit_recentre``, the last good pose is moved to where the frame's fit
+        stands (:meth:`recentred`): the person may have walked on since. Each runs the linear
+        and refinement stages (no centre stage: the joint-centre estimate learns from tracked
+        frames only), its temporal term towards its own start. With
         ``em.reinit_yaw_starts``, the coarse search over the trunk's yaw (:meth:`_yaw_search`)
         competes too; when it wins, the pose history restarts from its fit.
+
+        The fits are compared by :meth:`reinit_cost`: the NLL of eq. 3 on the same cloud, each
+        with its own sigma^2, plus ``em.reinit_limit_penalty`` nats per cloud point for a fit
+        ending at a limit of ``em.reinit_at_limits`` (this frame's first fit included): such
+        a fit is what flags a frame lost, so a fit that is not wins unless it explains the
+        cloud clearly worse.
         """
+        here = fit[0]
         starts = []
         if self._good is not None:
-            starts.append(("reinit-last-", self._good))
+            starts.append(("reinit-last-", self.recentred(self._good, here)))
         if len(self.history) >= 2:
             h = self.history
             starts.append(
@@ -2345,19 +2353,61 @@ class CloudRetargeter:
                     pin.integrate(self.model, h[-1], self.model_difference(h[-2], h[-1])),
                 )
             )
+        n = len(S)
         best = fit
         for tag, start in starts:
             q0, q_prev = self._reinit_start(start)
             cand = self._trial(S, Sn, q0, q_prev, log, tag)
-            if cand[2] < best[2]:
+            if self.reinit_cost(cand[0], cand[2], n) < self.reinit_cost(best[0], best[2], n):
                 best = cand
-        yaw = self._yaw_search(S, Sn, log)
-        if yaw is not None and yaw[2] < best[2]:
+        # A whip turn pivots on the feet: the soles' anchors (where the lost fit put them)
+        # would hold every turned start back. Released for the search, anchored again where
+        # a winning start puts the soles (fit() anchors soles that have none).
+        anchors = self._anchors
+        if self.config.em.reinit_release_contacts:
+            self._anchors = {}
+        yaw = self._yaw_search(S, Sn, log, here)
+        self._anchors = anchors
+        if yaw is not None and self.reinit_cost(yaw[0], yaw[2], n) < self.reinit_cost(
+            best[0], best[2], n
+        ):
             best = yaw
+            if self.config.em.reinit_release_contacts:
+                self._anchors = {}
             # The prediction must not extrapolate the jump to the turned pose: it goes on
             # from the new pose alone (fit() appends it).
             self.history.clear()
         return best
+
+    def reinit_cost(self, q: np.ndarray, nll: float, n_points: int) -> float:
+        r"""The re-initialisation's ranking of a fit: :math:`E + \rho N [q \text{ at a limit}]`.
+
+        :math:`E`: the fit's NLL (eq. 3, Wang 2017) on the frame's :math:`N` cloud points;
+        :math:`\rho`: ``em.reinit_limit_penalty`` [nats per point], added when a joint of
+        ``em.reinit_at_limits`` ends at its fit limit (:meth:`at_limits`). Not in Wang
+        2017: at a person's twist limit the fit's pelvis and torso disagree on the heading
+        (the rule that flags the frame lost), and on CMU 17_10 boxing's whip turns such a
+        fit, its arms laid on the cloud in whatever way, kept winning by 13-560 nats over
+        2,500 points against a start 10-20 deg from the person's shoulder line
+        (docs/point_clouds.md, twelfth round).
+        """
+        rho = self.config.em.reinit_limit_penalty
+        return float(nll) + (rho * n_points if rho > 0 and self.at_limits(q) else 0.0)
+
+    def recentred(self, start: np.ndarray, here: np.ndarray) -> np.ndarray:
+        """``start`` with its floating base moved horizontally to ``here``'s (x, y).
+
+        With ``em.reinit_recentre`` (else ``start`` unchanged): the last good pose is the
+        last frame that was not flagged lost, up to a second old, and the person may have
+        walked on since (on CMU 17_10 boxing's whip turn, 33 cm). Started there, 16 sigma
+        of the first E-step away, a start cannot reach the person; the frame's own fit,
+        lost in its heading or twist, still stands where the person does.
+        """
+        if not self.config.em.reinit_recentre or self.model.joints[1].nq != 7:
+            return start
+        out = start.copy()
+        out[:2] = here[:2]
+        return out
 
     def _reinit_start(self, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """A re-initialisation start within the limits and balanced, and its temporal reference."""
@@ -2410,11 +2460,12 @@ class CloudRetargeter:
         return out
 
     def _yaw_search(
-        self, S: np.ndarray, Sn: np.ndarray | None, log: list[IterationLog]
+        self, S: np.ndarray, Sn: np.ndarray | None, log: list[IterationLog], here: np.ndarray
     ) -> tuple[np.ndarray, float, float] | None:
         r"""Coarse global search over the trunk's yaw (issue 23 item 2; None when off).
 
-        Every start of :meth:`yaw_starts` around the last good pose gets
+        Every start of :meth:`yaw_starts` around the last good pose (moved to ``here``, the
+        frame's own fit, with ``em.reinit_recentre``: :meth:`recentred`) gets
         ``em.reinit_yaw_iterations`` iterations of the linear stage (temporal term towards its
         own start), and the one with the lowest NLL (eq. 3,
         :math:`E = -\sum_n \log(\frac{1-\mu}{M}\sum_m \mathcal N(s_n; v_m, \sigma^2 I)
@@ -2426,7 +2477,7 @@ class CloudRetargeter:
         if em.reinit_yaw_starts < 1 or self._good is None:
             return None
         best: tuple[np.ndarray, float, float, np.ndarray, str] | None = None
-        for psi, start in self.yaw_starts(self._good):
+        for psi, start in self.yaw_starts(self.recentred(self._good, here)):
             q0, q_prev = self._reinit_start(start)
             tag = f"reinit-yaw{math.degrees(psi):+.0f}-"
             q, sigma2, nll = self._trial(
