@@ -2467,11 +2467,12 @@ class CloudRetargeter:
         Every start of :meth:`yaw_starts` around the last good pose (moved to ``here``, the
         frame's own fit, with ``em.reinit_recentre``: :meth:`recentred`) gets
         ``em.reinit_yaw_iterations`` iterations of the linear stage (temporal term towards its
-        own start), and the one with the lowest NLL (eq. 3,
+        own start), and the one ranked first by :meth:`reinit_cost` (the NLL of eq. 3,
         :math:`E = -\sum_n \log(\frac{1-\mu}{M}\sum_m \mathcal N(s_n; v_m, \sigma^2 I)
-        + \frac{\mu}{N})`, each with its own :math:`\sigma^2`) is fitted on by the full linear
-        and refinement stages. A short fit suffices to rank the starts: the trunk and the arms
-        are most of the cloud, and a start half a turn from the person cannot lay them on it.
+        + \frac{\mu}{N})`, each with its own :math:`\sigma^2`, plus the limit penalty) is
+        fitted on by the full linear and refinement stages. A short fit suffices to rank the
+        starts: the trunk and the arms are most of the cloud, and a start half a turn from
+        the person cannot lay them on it.
         """
         em = self.config.em
         if em.reinit_yaw_starts < 1 or self._good is None:
@@ -2483,7 +2484,8 @@ class CloudRetargeter:
             q, sigma2, nll = self._trial(
                 S, Sn, q0, q_prev, log, tag, iterations=em.reinit_yaw_iterations, refine=False
             )
-            if best is None or nll < best[2]:
+            cost = self.reinit_cost(q, nll, len(S))
+            if best is None or cost < self.reinit_cost(best[0], best[2], len(S)):
                 best = (q, sigma2, nll, q_prev, tag)
         if best is None:
             return None
