@@ -238,7 +238,7 @@ class EMConfig:
             around whose ray the sensor saw nothing, or saw past it by more than 15 cm, is
             pulled across the image onto the nearest cloud point's ray at its own distance,
             with the weight of this many cloud points
-            (:class:`qpretarget.cloud.em.Silhouette`; docs/point_clouds.md, eleventh
+            (:class:`qpretarget.cloud.visibility.Silhouette`; docs/point_clouds.md, eleventh
             round). Needs ``refine_iterations > 0`` and a sensor position.
         silhouette_segments: the template segments whose points the silhouette pulls
             (``null``: all, as shipped). Leaving out the shanks and feet, whose supporting

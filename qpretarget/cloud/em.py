@@ -2354,25 +2354,25 @@ class CloudRetargeter:
                 )
             )
         n = len(S)
-        best = fit
+        best, best_cost = fit, self.reinit_cost(fit[0], fit[2], n)
         for tag, start in starts:
             q0, q_prev = self._reinit_start(start)
             cand = self._trial(S, Sn, q0, q_prev, log, tag)
-            if self.reinit_cost(cand[0], cand[2], n) < self.reinit_cost(best[0], best[2], n):
-                best = cand
+            cost = self.reinit_cost(cand[0], cand[2], n)
+            if cost < best_cost:
+                best, best_cost = cand, cost
         # A whip turn pivots on the feet: the soles' anchors (where the lost fit put them)
         # would hold every turned start back. Released for the search, anchored again where
         # a winning start puts the soles (fit() anchors soles that have none).
+        release = self.config.em.reinit_release_contacts
         anchors = self._anchors
-        if self.config.em.reinit_release_contacts:
+        if release:
             self._anchors = {}
         yaw = self._yaw_search(S, Sn, log, here)
         self._anchors = anchors
-        if yaw is not None and self.reinit_cost(yaw[0], yaw[2], n) < self.reinit_cost(
-            best[0], best[2], n
-        ):
+        if yaw is not None and self.reinit_cost(yaw[0], yaw[2], n) < best_cost:
             best = yaw
-            if self.config.em.reinit_release_contacts:
+            if release:
                 self._anchors = {}
             # The prediction must not extrapolate the jump to the turned pose: it goes on
             # from the new pose alone (fit() appends it).
@@ -2478,6 +2478,7 @@ class CloudRetargeter:
         if em.reinit_yaw_starts < 1 or self._good is None:
             return None
         best: tuple[np.ndarray, float, float, np.ndarray, str] | None = None
+        best_cost = math.inf
         for psi, start in self.yaw_starts(self.recentred(self._good, here)):
             q0, q_prev = self._reinit_start(start)
             tag = f"reinit-yaw{math.degrees(psi):+.0f}-"
@@ -2485,8 +2486,8 @@ class CloudRetargeter:
                 S, Sn, q0, q_prev, log, tag, iterations=em.reinit_yaw_iterations, refine=False
             )
             cost = self.reinit_cost(q, nll, len(S))
-            if best is None or cost < self.reinit_cost(best[0], best[2], len(S)):
-                best = (q, sigma2, nll, q_prev, tag)
+            if best is None or cost < best_cost:
+                best, best_cost = (q, sigma2, nll, q_prev, tag), cost
         if best is None:
             return None
         q, sigma2, _, q_prev, tag = best
