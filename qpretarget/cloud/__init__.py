@@ -16,7 +16,8 @@ constraints. The fitted joint angles are the robot's command. See ``docs/point_c
 """
 
 from .config import CloudConfig
-from .em import CloudRetargeter, FrameResult, e_step
+from .em import CloudRetargeter, FrameResult
+from .estep import e_step
 from .io import (
     CloudFormatError,
     CloudFrame,

@@ -3,7 +3,7 @@
 
 It runs the point-cloud fit's inner loops in C++: the exact k-nearest-neighbour searches
 (:func:`.neighbours.knn`), the k-d tree E-step's posteriors and weighted sums
-(:func:`.em.e_step`) and the cloud normals' scatter matrices (:func:`.io.estimate_normals`), in
+(:func:`.estep.e_step`) and the cloud normals' scatter matrices (:func:`.io.estimate_normals`), in
 the numpy code's order of operations, so that the fit is the same to the bit with or without it
 (``tests/cloud/test_compiled.py``). Optional: without it (no C++ compiler at install, or
 ``QPRETARGET_CLOUD_KERNEL=0``) the numpy code runs.

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // qpretarget's compiled point-cloud kernel (qpretarget/_cloud): the inner loops of the point-cloud
-// fit (qpretarget/cloud/em.py, io.py) in C++. Optional, like the controller's _kernel: without it
+// fit (qpretarget/cloud/estep.py, io.py) in C++. Optional, like the controller's _kernel: without it
 // qpretarget.cloud runs its numpy code, with the same results (tests/cloud/test_compiled.py).
 //
 //  * knn: exact k nearest neighbours (a kd-tree, Euclidean), the squared distances computed as
@@ -8,7 +8,7 @@
 //    differences), so that the same neighbours come with the same distances to the bit.
 //  * estep: the k-d tree E-step's posteriors (log-sum-exp over each cloud point's k pairs) and the
 //    posterior-weighted sums P^T [1 S Sn] the M-step needs, in the order of operations of the numpy
-//    code (em._log_posteriors, then scipy's CSC product), so that its results are the same to the bit.
+//    code (estep._log_posteriors, then scipy's CSC product), so that its results are the same to the bit.
 //  * scatter: the 3x3 scatter matrices of each point's neighbours (io.estimate_normals).
 //
 // The searches and the E-step's posteriors run on `threads` threads (Pool below): each cloud
@@ -347,7 +347,7 @@ inline double logaddexp(double x, double y) {
   return tmp;
 }
 
-// See em._kdtree_sums / em._log_posteriors. d2 empty (0 rows): computed from the pairs.
+// See estep._kdtree_sums / estep._log_posteriors. d2 empty (0 rows): computed from the pairs.
 std::tuple<Out1, Out1, Out2> estep(CArr2 B, CArr2 A, CIArr2 pairs, CArr2 d2in, double sigma2,
                                    double log_in, double log_out, CArr2 cols, int64_t mtot,
                                    int threads) {

@@ -87,7 +87,7 @@ def test_a_placement_out_of_the_legs_reach_turns_the_trunk_as_little_as_needed(g
     out = {}
     for plant in ("leg", "rigid"):
         rt = _retargeter(g1, plant)
-        rt._planted = ("left_foot", target)
+        rt.placement.planted = ("left_foot", target)
         q = rt.robot_configuration(q_fit, support)
         got = _sole(g1, q, "left_foot")
         assert np.abs(pin.log6(got.inverse() * target).vector).max() < 1e-8, plant
@@ -117,4 +117,4 @@ def test_a_second_supporting_sole_is_held_where_it_was_put_down(g1):
     assert np.allclose(q1[3:7], q_fit2[3:7], atol=1e-12)
     # A foot that stops supporting is released: put down again, it is held at its new pose.
     rt.robot_configuration(q_fit2, Support(feet=["left_foot"], primary="left_foot"))
-    assert "right_foot" not in rt._held
+    assert "right_foot" not in rt.placement.held
