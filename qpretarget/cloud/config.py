@@ -254,7 +254,7 @@ class EMConfig:
             the constant-velocity prediction, and the fit with the lowest NLL (eq. 3) kept.
         reinit_window: frames of the running median of sigma.
         reinit_at_limits: joints whose fitted angle ending at the fit's limit (within
-            0.01 rad, ``em.LIMIT_MARGIN``; :attr:`joint_limits` included) also flags the
+            0.01 rad, ``recovery.LIMIT_MARGIN``; :attr:`joint_limits` included) also flags the
             frame lost, whatever its sigma (``[]``: off). G1: ``[waist_yaw_joint]`` with
             the waist bounded to a person's twist: a trunk twisted as far as a person can
             twist is a pelvis and a torso that disagree on the heading (on CMU 17_10
@@ -289,8 +289,8 @@ class EMConfig:
             0 (docs/point_clouds.md, twelfth round).
         branch_joints: triples of joint names ``[a, b, c]``, each a chain of three revolute
             joints with mutually orthogonal axes (a shoulder's pitch, roll, yaw): when a fit
-            leaves one of them within ``BRANCH_MARGIN`` of a limit, the frame is fitted again
-            from the other angles giving the same rotation,
+            leaves one of them within ``recovery.BRANCH_MARGIN`` of a limit, the frame is
+            fitted again from the other angles giving the same rotation,
             :math:`(\theta_a + \pi, \pi - \theta_b, \theta_c + \pi)`, if they are within
             the limits, and the fit with the lower NLL (eq. 3) kept (``[]``: off).
         joint_limits: ``{joint: [low, high]}`` [rad]: the fit's range of those joints, within

@@ -6,7 +6,7 @@ rigidly to the joints that move them. Each body *segment* (pelvis, torso, head, 
 hand, thigh, shank, foot; left and right share one value) carries a scale factor
 :math:`s_k`: the joint placements inside the segment and the segment's template points are
 multiplied by it, so the model keeps the robot's joint axes, limits and degrees of freedom while
-its limb lengths become the subject's (estimated from a first frame, :mod:`.em`).
+its limb lengths become the subject's (estimated from a first frame, :mod:`.calibration`).
 
 Posed template point :math:`m` on joint :math:`j` (rigid attachment):
 
