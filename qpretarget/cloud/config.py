@@ -207,6 +207,15 @@ class EMConfig:
             pelvis away from the person's (CMU 14_07 reach-up on tiptoe: the fit's soles 10-32
             cm from the person's ankles). The support itself (balance rows, the command's
             stance) still comes from the support tracker.
+        posture_weight: :math:`\lambda_q` [nats per rad^2] of a pull of the joints of
+            ``posture_joints`` towards their rest angles while tracking,
+            :math:`\lambda_q \sum_j (\theta_j - \bar\theta_j)^2` (0: off; not in Wang
+            2017). For a joint the cloud barely determines: G1's waist yaw, the trunk's twist
+            between a pelvis whose heading its few, roundish points hardly show and a torso
+            whose heading the shoulders show well. Off in ``configs/cloud_g1.yaml``: on the
+            waist yaw it lowered the arm error of the 3 s clips but made boxing's whip turns
+            less sure (docs/point_clouds.md, thirteenth round).
+        posture_joints: ``{joint: rest angle [rad]}`` of that pull (``{}``: none).
         temporal_reference: ``previous`` (eq. 16: change from the previous frame) or
             ``prediction`` (change from the auto-regressive prediction, which does not lag).
         normal_weight: :math:`\lambda_\perp = \lambda_f` of eq. 15 and 21 (V.C: 0.5).
@@ -313,6 +322,8 @@ class EMConfig:
     contact_weight: float = 1.0e4
     contact_anchor: bool = True
     contact_height: float | None = None
+    posture_weight: float = 0.0
+    posture_joints: dict[str, float] = field(default_factory=dict)
     normal_weight: float = 0.5
     normal_scale: float = 0.05
     refine_iterations: int = 3
@@ -469,6 +480,17 @@ def _section(cls: type, spec: Any, path: str) -> Any:
                     path=f"{path}.{key}",
                 )
             value = {str(k): [float(v[0]), float(v[1])] for k, v in value.items()}
+        elif key in ("initial_joints", "posture_joints"):
+            if not isinstance(value, Mapping) or not all(
+                isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
+                for k, v in value.items()
+            ):
+                raise ConfigError(
+                    f"must map joint names to angles in rad, e.g. {{waist_yaw_joint: 0.0}}; "
+                    f"got {value!r}.",
+                    path=f"{path}.{key}",
+                )
+            value = {str(k): float(v) for k, v in value.items()}
         elif key == "personalize_segments" and value is not None:
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise ConfigError(

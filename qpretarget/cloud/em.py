@@ -227,6 +227,9 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         vi = self.robot.joint_v_index
         self._qi, self._vi = qi, vi
         self.q_min, self.q_max = self._fit_limits(cfg.em.joint_limits)
+        self._posture_q, self._posture_v, self._posture_ref = self._posture_joints(
+            cfg.em.posture_joints
+        )
         self._personal_segments = self._segment_ids(cfg.calibration.personalize_segments)
         self._rigid_segments = self._segment_ids(
             cfg.calibration.rigid_segments, path="calibration.rigid_segments"
@@ -295,6 +298,31 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
                 )
             lo[iq], hi[iq] = max(lo[iq], a), min(hi[iq], b)
         return lo, hi
+
+    def _posture_joints(self, spec: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Configuration and velocity indices and rest angles of ``em.posture_joints``.
+
+        Raises:
+            ConfigError: a joint the robot does not have, or a rest angle outside the fit's
+                range (``em.joint_limits`` within the robot's).
+        """
+        model = self.robot.model
+        iq, iv, ref = [], [], []
+        for name, angle in spec.items():
+            path = f"em.posture_joints.{name}"
+            self.robot.joint_index(name, path=path)  # a joint of the robot
+            joint = model.joints[model.getJointId(name)]
+            if not self.q_min[joint.idx_q] <= float(angle) <= self.q_max[joint.idx_q]:
+                raise ConfigError(
+                    f"rest angle {angle} rad of {name!r} lies outside the fit's range "
+                    f"[{self.q_min[joint.idx_q]:.3f}, {self.q_max[joint.idx_q]:.3f}]; give an "
+                    "angle within it.",
+                    path=path,
+                )
+            iq.append(joint.idx_q)
+            iv.append(joint.idx_v)
+            ref.append(float(angle))
+        return np.array(iq, dtype=int), np.array(iv, dtype=int), np.array(ref, float)
 
     def _segment_ids(
         self, names: list[str] | None, path: str = "calibration.personalize_segments"
@@ -535,7 +563,11 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         )
 
     def _prior(self, q: np.ndarray, q_prev: np.ndarray | None) -> float:
-        r"""Penalties added to the EM objective: :math:`\lambda_r E_r + \lambda_c E_c`."""
+        r"""The EM objective's penalties: :math:`\lambda_r E_r + \lambda_c E_c + \lambda_q E_q`.
+
+        :math:`E_q = \sum_j (\theta_j - \bar\theta_j)^2` over ``em.posture_joints`` while
+        tracking (with ``q_prev``; the calibration frame has its own posture term).
+        """
         out = 0.0
         if q_prev is not None and self.config.em.temporal_weight > 0:
             d = q[self._qi] - q_prev[self._qi]
@@ -543,6 +575,9 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         if self._contact_feet and self.config.em.contact_weight > 0:
             r, _ = self._contact_residual(q, jacobian=False)
             out += float(self.config.em.contact_weight * r @ r)
+        if q_prev is not None and self.config.em.posture_weight > 0 and self._posture_q.size:
+            d = q[self._posture_q] - self._posture_ref
+            out += float(self.config.em.posture_weight * d @ d)
         return out
 
     def _contact_residual(self, q: np.ndarray, *, jacobian: bool) -> tuple[np.ndarray, Any]:
@@ -631,6 +666,10 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             nv = self.robot.nv
             H[:nv, :nv] += w * (Jr.T @ Jr)
             g[:nv] += w * (Jr.T @ r)
+        if q_prev is not None and em.posture_weight > 0 and self._posture_q.size:
+            w = 2.0 * sigma2 * em.posture_weight
+            H[self._posture_v, self._posture_v] += w
+            g[self._posture_v] += w * (q[self._posture_q] - self._posture_ref)
 
     def sole_heights(self, q: np.ndarray) -> dict[str, float]:
         """World height of each sole of the fitted (HUMROB) model."""

@@ -167,6 +167,41 @@ def test_contact_term_jacobian_matches_finite_differences(g1, frame):
         assert np.allclose((r1 - r0) / h, J[:, i], atol=1e-6)
 
 
+def test_posture_pull_enters_the_objective_and_the_step(g1, frame):
+    """``em.posture_weight`` / ``posture_joints``: the penalty the acceptance rule sees is
+    lambda_q (theta - rest)^2 on the listed joint alone, the M-step gets its gradient, and a
+    fit from a twisted start keeps the penalised objective non-increasing and ends nearer the
+    rest angle than without it."""
+    S, q, sensor, T = frame
+    rest = {"waist_yaw_joint": 0.1}
+    rt = fitter(g1, T, sensor, temporal_weight=0.0, posture_weight=50.0, posture_joints=rest)
+    iq = g1.joint_q_index[g1.joint_index("waist_yaw_joint")]
+    q0 = start(g1, q)  # waist yaw 0.3 rad from the cloud's
+    # Exact to round-off (1e-12 relative): the only penalty on (no temporal term, no soles).
+    assert rt._prior(q0, q0) == pytest.approx(50.0 * (q0[iq] - 0.1) ** 2, rel=1e-12)
+    assert rt._prior(q0, None) == 0.0  # not on the calibration frame
+    H, g = np.zeros((g1.nv, g1.nv)), np.zeros(g1.nv)
+    sigma2 = 1e-4
+    rt._add_priors(H, g, q0, q0, sigma2)
+    h = 1e-7
+    for i in range(g1.nv):
+        dv = np.zeros(g1.nv)
+        dv[i] = h
+        fd = (rt._prior(pin.integrate(rt.model, q0, dv), q0) - rt._prior(q0, q0)) / h
+        # g = sigma^2 d(prior)/dv; forward differences are O(h) off (1e-5 of the 2 lambda h).
+        assert g[i] == pytest.approx(sigma2 * fd, abs=sigma2 * 1e-4)
+    assert np.count_nonzero(H) == 1 and H.max() == pytest.approx(2.0 * sigma2 * 50.0)
+    ends = {}
+    for weight in (0.0, 50.0):
+        rt = fitter(g1, T, sensor, temporal_weight=0.0, posture_weight=weight, posture_joints=rest)
+        rt.history = [q0]
+        res = rt.fit(CloudFrame(S))
+        obj = stage_values(res, "linear", "objective")
+        assert np.all(np.diff(obj) <= 1e-9 * np.abs(obj[:-1]))
+        ends[weight] = abs(res.q_fit[iq] - 0.1)
+    assert ends[50.0] < ends[0.0]
+
+
 def test_contact_term_flattens_supporting_soles_and_keeps_monotonicity(g1, frame):
     """A start with tilted soles: the contact term (stability on, both feet supporting) lays
     them flat while the penalised objective still never increases."""
@@ -753,6 +788,26 @@ def test_contact_height_is_checked():
         with pytest.raises(ConfigError, match=r"em\.contact_height"):
             CloudConfig.from_dict({"em": {"contact_height": bad}})
     assert CloudConfig.from_dict({"em": {"contact_height": None}}).em.contact_height is None
+
+
+def test_posture_joints_are_checked(g1, g1_template):
+    """``em.posture_joints`` must map joint names of the robot to angles within the fit's
+    range; each mistake is refused with its YAML path and the fix."""
+    from qpretarget.cloud.config import CloudConfig
+    from qpretarget.errors import ConfigError
+
+    for bad in ({"waist_yaw_joint": "0"}, ["waist_yaw_joint"], {"waist_yaw_joint": True}):
+        with pytest.raises(ConfigError, match=r"em\.posture_joints: must map joint names"):
+            CloudConfig.from_dict({"em": {"posture_joints": bad}})
+    for joints, message in (
+        ({"waist_yaw": 0.0}, r"em\.posture_joints\.waist_yaw: joint 'waist_yaw' is not known"),
+        ({"waist_yaw_joint": 1.0}, r"outside the fit's range \[-0\.800, 0\.800\]"),
+    ):
+        cfg = {"robot": "g1", "calibration": {"enabled": False},
+               "em": {"posture_weight": 30.0, "posture_joints": joints,
+                      "joint_limits": {"waist_yaw_joint": [-0.8, 0.8]}}}  # fmt: skip
+        with pytest.raises(ConfigError, match=message):
+            CloudRetargeter(cfg, robot=g1, template=g1_template)
 
 
 def test_every_run_starts_from_the_template_as_built(g1, g1_meshes, g1_sequence):
