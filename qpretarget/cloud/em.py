@@ -303,9 +303,16 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         """Configuration and velocity indices and rest angles of ``em.posture_joints``.
 
         Raises:
-            ConfigError: a joint the robot does not have, or a rest angle outside the fit's
-                range (``em.joint_limits`` within the robot's).
+            ConfigError: a joint the robot does not have, a rest angle outside the fit's
+                range (``em.joint_limits`` within the robot's), or a weight with no joint.
         """
+        if self.config.em.posture_weight > 0 and not spec:
+            raise ConfigError(
+                f"em.posture_weight is {self.config.em.posture_weight} but no joint is listed to "
+                "pull; list them with their rest angles, e.g. em.posture_joints: "
+                "{waist_yaw_joint: 0.0}, or set the weight to 0.",
+                path="em.posture_joints",
+            )
         model = self.robot.model
         iq, iv, ref = [], [], []
         for name, angle in spec.items():

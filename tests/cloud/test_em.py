@@ -808,6 +808,13 @@ def test_posture_joints_are_checked(g1, g1_template):
                       "joint_limits": {"waist_yaw_joint": [-0.8, 0.8]}}}  # fmt: skip
         with pytest.raises(ConfigError, match=message):
             CloudRetargeter(cfg, robot=g1, template=g1_template)
+    # A weight with nothing to pull would silently do nothing.
+    with pytest.raises(ConfigError, match=r"em\.posture_joints: em\.posture_weight is 30\.0"):
+        CloudRetargeter(
+            {"robot": "g1", "calibration": {"enabled": False}, "em": {"posture_weight": 30.0}},
+            robot=g1,
+            template=g1_template,
+        )
 
 
 def test_every_run_starts_from_the_template_as_built(g1, g1_meshes, g1_sequence):
