@@ -239,10 +239,10 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         )
         lo, hi = self.q_min[qi], self.q_max[qi]
         self._bounded = np.isfinite(lo) & np.isfinite(hi)
-        self._sole_ids = {f: self.model.getFrameId(d.frame) for f, d in self.robot.feet.items()}
-        self._contact_data = self.model.createData()
         #: The robot's configuration from the fit (:meth:`robot_configuration`).
         self.placement = SolePlacement(self.robot, self.template, st.plant)
+        self._sole_ids = self.placement.sole_ids  # the fitted soles' frames
+        self._contact_data = self.model.createData()
         self._qp_centres: QPProblem | None = None  # built at the first centre stage
         self._branch_joints: list[tuple[int, np.ndarray]] = []
         self._branch_data = self.robot.model.createData()

@@ -46,7 +46,8 @@ class SolePlacement:
         self.template = template
         self.model = template.model
         self.plant = plant
-        self._sole_ids = {f: self.model.getFrameId(d.frame) for f, d in robot.feet.items()}
+        #: foot -> its sole frame in the template's model (the fitted soles).
+        self.sole_ids = {f: self.model.getFrameId(d.frame) for f, d in robot.feet.items()}
         self._robot_data = robot.model.createData()  # the robot's kinematics
         self.reset()
 
@@ -90,7 +91,7 @@ class SolePlacement:
             target = self.planted[1]
         else:
             pin.framesForwardKinematics(self.model, self.template.data, q_fit)
-            fit_sole = self.template.data.oMf[self._sole_ids[foot]]
+            fit_sole = self.template.data.oMf[self.sole_ids[foot]]
             R = fit_sole.rotation
             yaw = math.atan2(R[1, 0], R[0, 0])
             target = pin.SE3(
