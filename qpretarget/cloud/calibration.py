@@ -66,7 +66,8 @@ class CalibrationMixin:
     _rigid_segments: np.ndarray | None
     recut_points: int
     rigid_points: int
-    # ... the joint-centre estimate (.centres.CentresMixin), which calibrate sets...
+    # ... the joint-centre estimate (.centres.CentresMixin, whose _init_centres starts it
+    # empty), which calibrate sets...
     _centre_basis: np.ndarray
     _centre_mean: np.ndarray
     _centre_info: np.ndarray

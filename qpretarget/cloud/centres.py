@@ -44,6 +44,13 @@ CENTRE_TOLERANCE = 5.0e-4
 class CentresMixin:
     """The centre stage of :class:`.em.CloudRetargeter` and its joint-centre estimate."""
 
+    # Set up here (_init_centres, which the fitter's __init__ calls): the joint-centre estimate,
+    # which the calibration sets, and the centre stage's QP...
+    _centre_mean: np.ndarray
+    _centre_info: np.ndarray
+    _centre_x: np.ndarray | None
+    _centre_base: np.ndarray
+    _qp_centres: QPProblem | None
     # Of the fitter (.em.CloudRetargeter), used here: its state...
     config: CloudConfig
     robot: RobotModel
@@ -52,14 +59,10 @@ class CentresMixin:
     stability_mode: str
     _n_rows: int
     _vi: np.ndarray
-    # ... the joint-centre estimate (its __init__ and reset start it, the calibration sets it)...
+    # ... the estimate's basis (the calibration sets it), the last centre stage's time (its
+    # reset starts it)...
     _centre_basis: np.ndarray
-    _centre_mean: np.ndarray
-    _centre_info: np.ndarray
-    _centre_x: np.ndarray | None
-    _centre_base: np.ndarray
     _centre_time: float | None
-    _qp_centres: QPProblem | None
     # ... and its methods.
     _pose: Callable[..., PosedTemplate]  # CloudRetargeter._pose
     _e_step: Callable[..., EStep]  # CloudRetargeter._e_step
@@ -71,6 +74,20 @@ class CentresMixin:
     _stable: Callable[[np.ndarray], bool]
     _moves: Callable[[np.ndarray, np.ndarray], tuple[float, float]]
     _clip: Callable[[np.ndarray], np.ndarray]
+
+    def _init_centres(self) -> None:
+        r"""Start the joint-centre estimate empty: no offsets until the calibration.
+
+        The mean :math:`\hat e` (``_centre_mean``), the information :math:`\Lambda`
+        (``_centre_info``), the current value :math:`e` (``_centre_x``; None: the centre stage
+        starts from :math:`\hat e`) and the fixed offsets (``_centre_base``, the anthropometric
+        model's); the centre stage's QP (``_qp_centres``) is built at the first centre stage.
+        """
+        self._centre_mean = np.zeros(0)
+        self._centre_info = np.zeros((0, 0))
+        self._centre_x = None
+        self._centre_base = np.zeros(0)
+        self._qp_centres = None
 
     def _centre_due(self, frame: CloudFrame | np.ndarray) -> bool:
         """Whether this frame gets a centre stage (``calibration.centre_rate``); records it."""

@@ -199,11 +199,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             )
         )
         self.model = self.template.model
-        # Joint-centre estimate (set by calibration): prior mean, information, current value.
-        self._centre_mean: np.ndarray = np.zeros(0)
-        self._centre_info: np.ndarray = np.zeros((0, 0))
-        self._centre_x: np.ndarray | None = None
-        self._centre_base: np.ndarray = np.zeros(0)  # fixed offsets (anthropometric model)
+        self._init_centres()  # the joint-centre estimate (empty until the calibration)
         make_solver(cfg.solver, path="solver")  # validate now
         self._solver = make_solver(cfg.solver, path="solver")
         self._solver_restore = make_solver(cfg.solver, path="solver")
@@ -243,27 +239,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         self.placement = SolePlacement(self.robot, self.template, st.plant)
         self._sole_ids = self.placement.sole_ids  # the fitted soles' frames
         self._contact_data = self.model.createData()
-        self._qp_centres: QPProblem | None = None  # built at the first centre stage
-        self._branch_joints: list[tuple[int, np.ndarray]] = []
-        self._branch_data = self.robot.model.createData()
-        self._branches = self._branch_triples(cfg.em.branch_joints)
-        self._yaw_data = self.model.createData()
-        names = cfg.em.reinit_yaw_reset
-        for n in names:
-            self.robot.joint_index(n, path="em.reinit_yaw_reset")  # a clear error if unknown
-        ids = [self.model.getJointId(n) for n in names]
-        self._yaw_reset = np.array([self.model.joints[j].idx_q for j in ids], dtype=int)
-        self._yaw_joint = max(ids, default=0)  # the deepest: its heading is kept
-        watch = []
-        for n in cfg.em.reinit_at_limits:
-            self.robot.joint_index(n, path="em.reinit_at_limits")  # a clear error if unknown
-            watch.append(self.model.joints[self.model.getJointId(n)].idx_q)
-        self._limit_watch = np.array(watch, dtype=int)  # their coordinates in q
-        if cfg.em.reinit_yaw_starts and self.model.joints[1].nq != 7:
-            raise ConfigError(
-                "the yaw search turns the floating base: the template's root must be a free-flyer.",
-                path="em.reinit_yaw_starts",
-            )
+        self._init_recovery()  # em.branch_joints, em.reinit_* (checked)
         self._contact_feet: tuple[str, ...] = ()
         # The frame's cloud normals when computed in the background (_prepare, _take_normals).
         self._normals_job: Callable[[], np.ndarray] | None = None

@@ -64,6 +64,15 @@ def _wrap_near(x: np.ndarray, ref: np.ndarray) -> np.ndarray:
 class RecoveryMixin:
     """The re-initialisation of a lost frame and the shoulder-branch switch (module docstring)."""
 
+    # Set up here (_init_recovery, which the fitter's __init__ calls: em.branch_joints,
+    # em.reinit_*)...
+    _branches: list[np.ndarray]
+    _branch_joints: list[tuple[int, np.ndarray]]
+    _branch_data: Any  # pinocchio.Data
+    _yaw_data: Any  # pinocchio.Data
+    _yaw_reset: np.ndarray
+    _yaw_joint: int
+    _limit_watch: np.ndarray
     # Of the fitter (.em.CloudRetargeter), used here: its state...
     config: CloudConfig
     robot: RobotModel
@@ -75,19 +84,45 @@ class RecoveryMixin:
     _good: np.ndarray | None
     _sigmas: list[float]
     _anchors: dict[str, tuple[np.ndarray, float]]
-    # ... what its __init__ sets up for this mixin (em.branch_joints, em.reinit_*)...
-    _branches: list[np.ndarray]
-    _branch_joints: list[tuple[int, np.ndarray]]
-    _branch_data: Any  # pinocchio.Data
-    _yaw_data: Any  # pinocchio.Data
-    _yaw_reset: np.ndarray
-    _yaw_joint: int
-    _limit_watch: np.ndarray
     # ... and its methods.
     _clip: Callable[[np.ndarray], np.ndarray]
     _restore_balance: Callable[[np.ndarray], tuple[np.ndarray, bool]]
     model_difference: Callable[[np.ndarray, np.ndarray], np.ndarray]
     _trial: Callable[..., tuple[np.ndarray, float, float]]  # CloudRetargeter._trial
+
+    def _init_recovery(self) -> None:
+        """Check the joints of ``em.branch_joints`` and ``em.reinit_*``; set up their indices.
+
+        The triples' indices (:meth:`_branch_triples`); the coordinates in q of
+        ``em.reinit_yaw_reset`` and the deepest of them (whose heading the yaw starts keep),
+        and of ``em.reinit_at_limits``.
+
+        Raises:
+            ConfigError: a joint the robot does not have, a triple that is not three orthogonal
+                one-DoF joints in a chain, or ``em.reinit_yaw_starts`` on a template whose root
+                is not a free-flyer.
+        """
+        em = self.config.em
+        self._branch_joints = []
+        self._branch_data = self.robot.model.createData()
+        self._branches = self._branch_triples(em.branch_joints)
+        self._yaw_data = self.model.createData()
+        names = em.reinit_yaw_reset
+        for n in names:
+            self.robot.joint_index(n, path="em.reinit_yaw_reset")  # a clear error if unknown
+        ids = [self.model.getJointId(n) for n in names]
+        self._yaw_reset = np.array([self.model.joints[j].idx_q for j in ids], dtype=int)
+        self._yaw_joint = max(ids, default=0)  # the deepest: its heading is kept
+        watch = []
+        for n in em.reinit_at_limits:
+            self.robot.joint_index(n, path="em.reinit_at_limits")  # a clear error if unknown
+            watch.append(self.model.joints[self.model.getJointId(n)].idx_q)
+        self._limit_watch = np.array(watch, dtype=int)  # their coordinates in q
+        if em.reinit_yaw_starts and self.model.joints[1].nq != 7:
+            raise ConfigError(
+                "the yaw search turns the floating base: the template's root must be a free-flyer.",
+                path="em.reinit_yaw_starts",
+            )
 
     def _lost(self, sigma2: float) -> bool:
         """Whether the frame's fit looks lost: sigma above ``em.reinit_ratio`` times the median."""
