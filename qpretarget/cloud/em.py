@@ -382,16 +382,6 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         self.history.append(q.copy())
         del self.history[: -max(self.config.em.ar_window + 2, 4)]
 
-    def _tracked(self, q: np.ndarray, sigma2: float) -> None:
-        """Count the frame's fit ``q`` as tracked: the last good pose, its sigma in the baseline.
-
-        The baseline is the last ``em.reinit_window`` sigmas :meth:`.recovery.RecoveryMixin._lost`
-        takes the median of.
-        """
-        self._sigmas.append(math.sqrt(sigma2))
-        self._good = q.copy()
-        del self._sigmas[: -max(self.config.em.reinit_window, 1)]
-
     def _personalize_online(
         self,
         S: np.ndarray,
@@ -1006,19 +996,12 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         Sn = self._take_normals(Sn)
         if self._branches:
             q, sigma2, nll = self._switch_branches(S, Sn, (q, sigma2, nll), log)
-        at_limits = self._at_limits(q)
-        if self._lost(sigma2) or at_limits:
-            first = (q, sigma2, nll)
-            q, sigma2, nll = kept = self._reinitialise(S, Sn, first, log)
-            if kept is first and not at_limits:
-                # Flagged by its sigma alone, and no other start explains the cloud better:
-                # a pose the template fits worse than the recent ones (CMU 14_14's deep squat),
-                # not a lost fit. Tracked: its sigma joins the baseline, and its pose is the
-                # last good one the next re-initialisation starts from (else a long such pose
-                # keeps every frame flagged and that start a second old; docs/point_clouds.md).
-                self._tracked(q, sigma2)
+        if self._lost(sigma2) or self._at_limits(q):
+            q, sigma2, nll = self._reinitialise(S, Sn, (q, sigma2, nll), log)
         else:
-            self._tracked(q, sigma2)
+            self._sigmas.append(math.sqrt(sigma2))
+            self._good = q.copy()
+            del self._sigmas[: -max(self.config.em.reinit_window, 1)]
             self._personalize_online(S, Sn, q, sigma2, frame)
         self._sub = None
         rule = ""

@@ -5,7 +5,7 @@ Mixed into the EM fit, :class:`.em.CloudRetargeter` (:class:`RecoveryMixin`). No
 (HUMROB), where each frame starts from the prediction of the previous poses (V.B) alone.
 
 **A lost frame** (issue 23 item 2): a frame whose :math:`\sigma` is above ``em.reinit_ratio``
-times the median of the recent tracked frames' (:meth:`RecoveryMixin._lost`), or
+times the median of the recent frames' that were not lost (:meth:`RecoveryMixin._lost`), or
 whose fit ends a joint of ``em.reinit_at_limits`` within :data:`LIMIT_MARGIN` of its fit limit
 (:meth:`RecoveryMixin.at_limits`), is fitted again (:meth:`RecoveryMixin._reinitialise`) from
 the last good pose (moved to where the frame's fit stands, ``em.reinit_recentre``), from the
@@ -16,9 +16,6 @@ constant-velocity prediction, and by a coarse search over the trunk's yaw
 :math:`E + \rho N [q \text{ at a limit}]` (:meth:`RecoveryMixin.reinit_cost`): the NLL of eq. 3
 on the frame's :math:`N` cloud points, each fit with its own :math:`\sigma^2`, plus
 ``em.reinit_limit_penalty`` :math:`\rho` nats per point for a fit ending at such a limit.
-A frame flagged by its :math:`\sigma` alone whose own fit no other start beats was not lost
-(a pose the template fits worse for a while, as a deep squat): it counts as tracked, its
-:math:`\sigma` joining the baseline and its pose the last good one (``CloudRetargeter.fit``).
 
 **Shoulder branches** (:meth:`RecoveryMixin._switch_branches`): three orthogonal one-DoF joints
 a -> b -> c (``em.branch_joints``) give their last joint the same rotation with the angles
@@ -128,10 +125,7 @@ class RecoveryMixin:
             )
 
     def _lost(self, sigma2: float) -> bool:
-        """Whether the frame's fit looks lost: sigma above ``em.reinit_ratio`` times the median.
-
-        The median of the last ``em.reinit_window`` tracked frames' sigmas (``_sigmas``).
-        """
+        """Whether the frame's fit looks lost: sigma above ``em.reinit_ratio`` times the median."""
         em = self.config.em
         if not em.reinit_ratio > 0 or len(self._sigmas) < 5 or self._good is None:
             return False
