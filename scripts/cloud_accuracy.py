@@ -18,6 +18,7 @@ length and render seed are rendered once.
     python scripts/cloud_accuracy.py                       # six clips x template seeds 0-2, 3 s
     python scripts/cloud_accuracy.py --render-seeds 0 1 2  # x three renderings (the docs' 54)
     python scripts/cloud_accuracy.py --clips boxing --frames 300 --render-seeds 0 1 2 3 4
+    python scripts/cloud_accuracy.py --render-seeds 0 1 2 --lead-in-speed 2  # a person's pace
     python scripts/cloud_accuracy.py --clips chicken reach --set em.reinit_ratio=0 \\
         --set "em.joint_limits={}"                         # a setting against the shipped one
 """
@@ -68,17 +69,28 @@ def _clip_path(name: str) -> Path:
     )
 
 
-def _rendering(clip: str, frames: int, seed: int, cache: Path) -> Path:
-    """The cached rendering of ``clip`` (``frames`` at 30 Hz, noise ``seed``), made if missing."""
+def _rendering(
+    clip: str, frames: int, seed: int, cache: Path, lead_in_speed: float | None = None
+) -> Path:
+    """The cached rendering of ``clip`` (``frames`` at 30 Hz, noise ``seed``), made if missing.
+
+    ``lead_in_speed``: ``make-cloud --lead-in-speed`` (None: its default, 4 frames).
+    """
     from qpretarget.cloud.render import clip_cloud_sequence
 
-    path = cache / f"{Path(_clip_path(clip)).stem}_{frames}_{seed}.npz"
+    lead = "" if lead_in_speed is None else f"_lead{lead_in_speed:g}"
+    path = cache / f"{Path(_clip_path(clip)).stem}_{frames}_{seed}{lead}.npz"
     if not path.is_file():
         syn, _ = clip_cloud_sequence(
-            _clip_path(clip), rate=30.0, duration=(frames - 1) / 30.0, seed=seed
+            _clip_path(clip),
+            rate=30.0,
+            duration=(frames - 1) / 30.0,
+            seed=seed,
+            lead_in_speed=lead_in_speed,
         )
         seq = syn.sequence
-        seq.meta["human_q"] = syn.q  # as make-cloud stores it
+        seq.meta["human_q"] = syn.q  # as make-cloud stores them
+        seq.meta["lead_in_frames"] = np.asarray(syn.lead_in_frames)
         tmp = path.with_suffix(".tmp.npz")
         seq.save(tmp)
         tmp.replace(path)  # atomically: a parallel worker never reads half a file
@@ -102,8 +114,8 @@ def _config(path: Path, sets: list[str], template_seed: int) -> dict[str, Any]:
     return spec
 
 
-def _run(job: tuple[str, int, int, int, str, list[str], str]) -> dict[str, Any]:
-    clip, frames, render_seed, template_seed, config, sets, cache = job
+def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> dict[str, Any]:
+    clip, frames, render_seed, template_seed, config, sets, cache, lead_in_speed = job
     import qpretarget as qp
     from qpretarget.cloud.config import CloudConfig
     from qpretarget.cloud.em import CloudRetargeter
@@ -111,7 +123,7 @@ def _run(job: tuple[str, int, int, int, str, list[str], str]) -> dict[str, Any]:
     from qpretarget.cloud.measures import arm_direction_errors, arm_direction_summary
     from qpretarget.cloud.render import HumanPoser
 
-    seq = read_cloud_sequence(_rendering(clip, frames, render_seed, Path(cache)))
+    seq = read_cloud_sequence(_rendering(clip, frames, render_seed, Path(cache), lead_in_speed))
     g1 = qp.load_robot("g1")
     cfg = CloudConfig.from_dict(_config(Path(config), sets, template_seed))
     traj, results = CloudRetargeter(cfg, robot=g1).run(seq)
@@ -145,9 +157,16 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2, help="runs in parallel (default 2)")
     ap.add_argument("--cache", default=str(Path.home() / ".cache" / "qpretarget" / "clouds"))
     ap.add_argument("--json", help="write every run's figures here")
+    ap.add_argument(
+        "--lead-in-speed",
+        type=float,
+        help="render the move into the clip at a person's pace (make-cloud --lead-in-speed)",
+    )
     args = ap.parse_args()
     if args.frames < 2 or args.jobs < 1:
         raise SystemExit("need --frames >= 2 and --jobs >= 1.")
+    if args.lead_in_speed is not None and not args.lead_in_speed > 0:
+        raise SystemExit(f"--lead-in-speed must be > 0 m/s, got {args.lead_in_speed}.")
     for clip in args.clips:
         _clip_path(clip)
     _config(Path(args.config), args.set, 0)  # a bad --set fails before any work
@@ -155,9 +174,9 @@ def main() -> None:
     cache.mkdir(parents=True, exist_ok=True)
     for clip in args.clips:  # render once, before the runs that share a rendering
         for seed in args.render_seeds:
-            _rendering(clip, args.frames, seed, cache)
+            _rendering(clip, args.frames, seed, cache, args.lead_in_speed)
     jobs = [
-        (clip, args.frames, r, s, args.config, args.set, str(cache))
+        (clip, args.frames, r, s, args.config, args.set, str(cache), args.lead_in_speed)
         for clip in args.clips
         for r in args.render_seeds
         for s in args.template_seeds
@@ -192,7 +211,13 @@ def main() -> None:
     print(f"mean of the worst {np.mean(means):.2f} deg; within 12 deg on every run: "
           f"{', '.join(within) or 'none'}")  # fmt: skip
     if args.json:
-        out = {"config": args.config, "set": args.set, "frames": args.frames, "runs": rows}
+        out = {
+            "config": args.config,
+            "set": args.set,
+            "frames": args.frames,
+            "lead_in_speed": args.lead_in_speed,
+            "runs": rows,
+        }
         from qpretarget.fileio import write_atomic
 
         text = json.dumps(out, indent=1)

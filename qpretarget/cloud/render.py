@@ -489,6 +489,8 @@ class SyntheticSequence:
         normals: per frame, (N, 3) true surface normals (0 for outliers).
         clean: per frame, (N, 3) points before noise.
         meshes: the rendered meshes. camera: the camera.
+        lead_in_frames: frames before the clip's first (:func:`human_clip_sequence`: the
+            calibration posture and the move into the clip; 0 otherwise).
     """
 
     sequence: CloudSequence
@@ -498,6 +500,7 @@ class SyntheticSequence:
     clean: list[np.ndarray]
     meshes: LinkMeshes
     camera: Camera
+    lead_in_frames: int = 0
 
 
 def render_sequence(
@@ -528,12 +531,33 @@ def render_sequence(
     return SyntheticSequence(seq, np.asarray(q, float), link, normals, clean, meshes, camera)
 
 
+def interpolation_peak_rate(
+    poser: HumanPoser, q0: np.ndarray, q1: np.ndarray, samples: int = 64
+) -> float:
+    r"""Fastest key-point's rate [m per unit of :math:`a`] along the joint-space line q0 -> q1.
+
+    :math:`G = \max_k \max_a |\partial p_k(q(a)) / \partial a|` for
+    :math:`q(a) =` ``pin.interpolate(q0, q1, a)``, by differences over ``samples`` steps. A
+    move :math:`a = s(t / T)` then has key-point speeds at most :math:`G \max s' / T`
+    (:math:`\max s' = 1.875` for the minimum-jerk profile of :func:`human_clip_sequence`).
+    """
+    h = poser.robot
+    pts = [
+        poser.model_keypoints(pin.interpolate(h.model, q0, q1, float(a)))
+        for a in np.linspace(0.0, 1.0, samples + 1)
+    ]
+    names = list(pts[0])
+    P = np.array([[p[k] for k in names] for p in pts])  # (samples + 1, K, 3)
+    return float(np.linalg.norm(np.diff(P, axis=0), axis=2).max() * samples)
+
+
 def human_clip_sequence(
     keypoints: Mapping[str, np.ndarray],
     orientations: Mapping[str, np.ndarray],
     t: np.ndarray,
     *,
     calibration_frames: int = 4,
+    lead_in_speed: float | None = None,
     arm_abduction: float = 0.5,
     distance: float = 2.8,
     noise: float = 0.005,
@@ -543,12 +567,21 @@ def human_clip_sequence(
     downscale: int = 2,
     ground_window: float = 1.0,
 ) -> tuple[SyntheticSequence, HumanPoser]:
-    """The human model posed by a clip, rendered by a Kinect-like camera in front of it.
+    r"""The human model posed by a clip, rendered by a Kinect-like camera in front of it.
 
     The sequence starts with the calibration posture (standing upright facing the camera, arms
     abducted by ``arm_abduction`` [rad], feet centred where the clip's first frame has them,
-    facing the clip's first heading), then
-    ``calibration_frames`` frames interpolating to the clip's first pose, then the clip. The
+    facing the clip's first heading), then ``calibration_frames`` frames moving into the
+    clip's first pose (joint-space interpolation, linear in time), then the clip. With
+    ``lead_in_speed`` the move goes at a person's pace instead: a minimum-jerk profile
+    :math:`s(\tau) = 10\tau^3 - 15\tau^4 + 6\tau^5` (Flash & Hogan 1985),
+    :math:`\tau = t / T`, :math:`\max s' = 1.875`, over :math:`T = 1.875\,G / v` with
+    :math:`G` the fastest key-point's rate along the interpolation
+    (:func:`interpolation_peak_rate`), so that no key-point (hands, feet, head...) moves
+    faster than :math:`v =` ``lead_in_speed``; at least ``calibration_frames`` + 1 steps.
+    The 4 frames of the default take a hand 0.3-1.2 m in 0.17 s on the shared clips (2-7
+    m/s), a jump a person does not make; the docs' figures are measured on it
+    (docs/point_clouds.md, *Fifteenth round*, for both). The
     person stands on the floor (z = 0): the calibration posture's lowest point is on it (and
     each frame's moving into the clip), and each clip frame is lowered or raised by the lowest
     point of the model within ``ground_window`` seconds around it (a jump shorter than half
@@ -560,7 +593,10 @@ def human_clip_sequence(
         keypoints: clip key-points, name -> (T, 3) [m], z up (``keypoint_positions(motion)``).
         orientations: ``waist``/``torso``/``head`` -> (T, 3, 3) (``keypoint_orientations()``).
         t: (T,) clip times [s].
-        calibration_frames: frames moving from the calibration posture into the clip.
+        calibration_frames: frames moving from the calibration posture into the clip (the
+            fewest with ``lead_in_speed``).
+        lead_in_speed: None, or the peak speed [m/s] of the fastest key-point while moving
+            into the clip (2: a brisk arm movement; an unhurried reach peaks at about 1 m/s).
         arm_abduction: shoulder abduction of the calibration posture [rad].
         distance: horizontal distance of the camera in front of the person [m].
         noise: range noise [m].
@@ -602,8 +638,17 @@ def human_clip_sequence(
     r = max(int(round(0.5 * float(ground_window) / dt)), 0)
     Q[:, 2] -= [low[max(0, i - r) : i + r + 1].min() for i in range(len(Q))]
     qa[2] -= lowest(qa)
-    n = int(calibration_frames)
-    lead = [pin.interpolate(h.model, qa, Q[0], a) for a in np.linspace(0.0, 1.0, n + 2)[:-1]]
+    steps = int(calibration_frames) + 1
+    if lead_in_speed is None:
+        profile = np.linspace(0.0, 1.0, steps + 1)[:-1]
+    else:
+        if not lead_in_speed > 0:
+            raise ConfigError(f"lead_in_speed must be > 0 m/s, got {lead_in_speed}.")
+        rate = interpolation_peak_rate(poser, qa, Q[0])
+        steps = max(steps, int(np.ceil(1.875 * rate / (float(lead_in_speed) * dt))))
+        tau = np.arange(steps) / steps
+        profile = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+    lead = [pin.interpolate(h.model, qa, Q[0], float(a)) for a in profile]
     for q in lead[1:]:  # standing on the floor while moving into the clip
         q[2] -= lowest(q)
     Qall = np.array(lead + list(Q))
@@ -623,6 +668,7 @@ def human_clip_sequence(
         outlier_fraction=outlier_fraction,
         seed=seed,
     )
+    syn.lead_in_frames = len(lead)
     return syn, poser
 
 
@@ -640,10 +686,11 @@ def clip_cloud_sequence(
     Loads the clip (any format :func:`~qpretarget.motion.load_motion` reads), resamples it by
     taking the clip frame nearest to each tick of ``rate`` from ``start`` for ``duration``
     seconds (all of it when None), and renders it with :func:`human_clip_sequence` (calibration
-    posture first, then ``calibration_frames`` frames moving into the clip), by default at the
+    posture first, then the move into the clip), by default at the
     full Kinect V2 resolution (``downscale`` 1: about 9,000 points on the person at 2.8 m).
     ``render`` holds the other options of :func:`human_clip_sequence` (``calibration_frames``,
-    ``distance``, ``noise``, ``outlier_fraction``, ``seed``...), with its defaults.
+    ``lead_in_speed``, ``distance``, ``noise``, ``outlier_fraction``, ``seed``...), with its
+    defaults.
 
     Raises:
         ConfigError: a rate <= 0, a negative start, a duration <= 0, or a start past the clip's
@@ -763,6 +810,7 @@ def joint_uncertainty(
 __all__ = [
     "SyntheticSequence",
     "human_clip_sequence",
+    "interpolation_peak_rate",
     "render_sequence",
     "HUMAN_TO_Z_UP",
     "joint_observability",

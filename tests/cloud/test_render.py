@@ -86,7 +86,8 @@ def test_the_rendered_person_stands_on_the_floor(mocap):
         pin.forwardKinematics(h.model, data, q)
         low.append(meshes.posed(data)[..., 2].min())
     low = np.array(low)
-    lead = 5  # the calibration posture and 4 frames moving into the clip
+    lead = syn.lead_in_frames  # the calibration posture and the move into the clip
+    assert lead >= 5
     assert np.all(np.abs(low[:lead]) < 1e-9)
     clip = low[lead:]
     r = 15  # half of 1 s at 30 Hz
@@ -94,6 +95,38 @@ def test_the_rendered_person_stands_on_the_floor(mocap):
     assert np.all(np.abs(window_min) < 1e-9)
     toes = [min(poser.model_keypoints(q)[f"{s}_toe"][2] for s in ("left", "right")) for q in syn.q]
     assert np.median(toes) < 0.08  # on the floor or on the balls of the feet, not in the air
+
+
+def test_the_move_into_the_clip_is_at_a_persons_pace(mocap):
+    """``make-cloud --lead-in-speed``: the person moves from the calibration posture into the
+    clip's first pose with no key-point faster than ``lead_in_speed`` (2 m/s here), instead of
+    the default 4 frames whatever the distance: CMU 49_18 (one-leg balance) raises both arms,
+    the left hand 1.2 m away, at 7 m/s in the default's 5 steps. Measured: 1.81 m/s at the
+    fastest key-point between frames (the move's duration bounds the speed: the fastest
+    key-point's rate along the interpolation times the profile's peak, which fall at
+    different moments). Bounds: at most 2 % above 2 m/s (the rates are differences over 64
+    steps of the interpolation), at least 1.6 m/s (the move is not needlessly slow); the move
+    starts and ends at rest (the first and last steps below a tenth of the peak), frame 0 is
+    the calibration posture (arms abducted 0.5 rad) and the clip follows the move unchanged.
+    """
+    from qpretarget.cloud.render import clip_cloud_sequence
+
+    clip = mocap / "cmu_49_18_one_leg_balance.bvh"
+    syn, poser = clip_cloud_sequence(clip, rate=30.0, duration=0.2, downscale=8, lead_in_speed=2)
+    lead = syn.lead_in_frames
+    names = list(poser.model_keypoints(syn.q[0]))
+    P = np.array([[poser.model_keypoints(q)[k] for k in names] for q in syn.q[: lead + 1]])
+    speed = np.linalg.norm(np.diff(P, axis=0), axis=2).max(axis=1) * 30.0  # (lead,) [m/s]
+    assert 1.6 <= speed.max() <= 2.0 * 1.02
+    assert speed[0] < 0.1 * speed.max() and speed[-1] < 0.1 * speed.max()
+    assert lead > 30  # 1.2 m at a person's pace takes over a second
+    h = poser.robot
+    for side in ("left", "right"):
+        i = h.joint_q_index[h.joint_index(f"{side}_shoulder_X")]
+        assert syn.q[0][i] == 0.5
+    fixed, _ = clip_cloud_sequence(clip, rate=30.0, duration=0.2, downscale=8)
+    assert fixed.lead_in_frames == 5  # the default: 4 frames after the calibration posture
+    np.testing.assert_allclose(fixed.q[5:], syn.q[lead:], atol=1e-12)  # the same clip after it
 
 
 def test_noise_on_an_empty_view():
