@@ -64,6 +64,8 @@ class CalibrationMixin:
     _vi: np.ndarray
     _frame_cloud: np.ndarray | None
     _rigid_segments: np.ndarray | None
+    _tube_segments: np.ndarray | None
+    tube_points: int
     recut_points: int
     rigid_points: int
     # ... the joint-centre estimate (.centres.CentresMixin, whose _init_centres starts it
@@ -186,6 +188,9 @@ class CalibrationMixin:
             if cal.centre_cuts == "centres":
                 # The limbs' surfaces cut at the person's centres, not the robot's links.
                 self.recut_points = T.assign_by_centres(q, reach=cal.centre_bound)
+        if self._tube_segments is not None and len(self._tube_segments):
+            # A person's limbs about their joint lines, not the robot's link shapes.
+            self.tube_points = T.limbs_as_tubes(q, [int(k) for k in self._tube_segments])
         if self._rigid_segments is not None and len(self._rigid_segments):
             self.rigid_points = T.attach_rigidly(q, list(self._rigid_segments))
         self._centre_info = np.eye(nc) / max(cal.centre_prior, 1e-9) ** 2

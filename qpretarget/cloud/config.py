@@ -154,6 +154,13 @@ class CalibrationConfig:
             person's centre moving to the segment on their side
             (:meth:`~qpretarget.cloud.template.Template.assign_by_centres`); ``links``
             keeps the robot's link boundaries (before this option).
+        limb_tubes: segments whose surfaces become tubes about their joint-centre lines at
+            calibration (:meth:`~qpretarget.cloud.template.Template.limbs_as_tubes`; after
+            the cuts, before ``rigid_segments``): the radius along the limb from the subject's
+            own points, the axis the line from the segment's centre to the next one's. A
+            person's long bones run down the middle of their limbs; a robot's links are not
+            tubes, and a fit that lays them on a person's limb tilts the joint line by what
+            their shape is off it. The shipped config: ``[upper_arm, forearm]``.
     """
 
     enabled: bool = True
@@ -180,6 +187,7 @@ class CalibrationConfig:
     centre_model: str = "robot"
     centre_symmetric: bool = False
     centre_cuts: str = "centres"
+    limb_tubes: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -497,7 +505,7 @@ def _section(cls: type, spec: Any, path: str) -> Any:
                     f"must be a list of segment names or null, got {value!r}.",
                     path=f"{path}.{key}",
                 )
-        elif key == "rigid_segments":
+        elif key in ("rigid_segments", "limb_tubes"):
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise ConfigError(
                     f"must be a list of segment names (e.g. [torso]), got {value!r}.",

@@ -233,6 +233,9 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         self._silhouette_segments = self._segment_ids(
             cfg.em.silhouette_segments, path="em.silhouette_segments"
         )
+        self._tube_segments = self._segment_ids(
+            cfg.calibration.limb_tubes, path="calibration.limb_tubes"
+        )
         lo, hi = self.q_min[qi], self.q_max[qi]
         self._bounded = np.isfinite(lo) & np.isfinite(hi)
         #: The robot's configuration from the fit (:meth:`robot_configuration`).
@@ -249,6 +252,8 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         self.recut_points = 0
         #: Template points ``calibration.rigid_segments`` moved to their segment's first joint.
         self.rigid_points = 0
+        #: Template points ``calibration.limb_tubes`` replaced by the limbs' tubes.
+        self.tube_points = 0
         # The template as built: every run (reset) starts from it, not from the surface the
         # previous subject left (calibration and online personalisation change it).
         self._template_state = self.template.surface_state()

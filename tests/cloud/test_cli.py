@@ -75,8 +75,9 @@ def test_make_cloud_then_retarget_cloud(tmp_path, mocap, g1, capsys):
 
     0.3 s of CMU 14_37 at 10 Hz (4 clip frames after the calibration lead-in), half
     Kinect resolution to keep the test short. The run must have every frame ok, and its arms
-    follow the rendered human: worst segment 8.4 deg measured on this excerpt (left forearm;
-    6.7 / 3.3 / 6.4 deg the others), asserted against the issue's 12 deg.
+    follow the rendered human: worst segment 9.0 deg measured on this excerpt (left forearm;
+    5.4 / 2.0 / 2.8 deg the others; 8.4 before the arms were tubes), asserted against the
+    issue's 12 deg.
     """
     from pathlib import Path
 
@@ -135,7 +136,8 @@ def test_accuracy_script_reproduces_the_measure(tmp_path, mocap, g1):
     clip (6 clip frames after the lead-in, one template seed) writes its figures; the
     worst segment is the measure of the docs recomputed from the cached rendering's truth and
     a fit of the same config (1e-9 deg: same fit, same formula), within issue 23's 12 deg
-    (measured 6.4), and a bad --set fails with a one-line message before any work."""
+    (measured 10.4; 6.4 before the arms were tubes), and a bad --set fails with a one-line
+    message before any work."""
     import json
     import subprocess
     import sys

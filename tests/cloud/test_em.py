@@ -740,6 +740,15 @@ def test_personalize_segments_are_checked(g1, g1_template):
             robot=g1,
             template=g1_template,
         )
+    # calibration.limb_tubes likewise.
+    with pytest.raises(ConfigError, match=r"calibration\.limb_tubes.*segment names"):
+        CloudConfig.from_dict({"calibration": {"limb_tubes": "upper_arm"}})
+    with pytest.raises(ConfigError, match=r"calibration\.limb_tubes.*'upperarm'.*'upper_arm'"):
+        CloudRetargeter(
+            {"robot": "g1", "calibration": {"limb_tubes": ["upperarm"]}},
+            robot=g1,
+            template=g1_template,
+        )
 
 
 def test_contact_height_releases_raised_soles(g1, frame):

@@ -346,3 +346,61 @@ def test_attach_rigidly_makes_a_segment_one_body(g1, g1_meshes):
         assert (T2.joint == roll).sum() == (
             count[f"{side}_shoulder_roll_joint"] + count[f"{side}_shoulder_yaw_joint"]
         )
+
+
+def test_limbs_as_tubes_centre_the_surface_on_the_joint_line(g1, g1_meshes):
+    """``limbs_as_tubes``: each arm segment's surface becomes a tube about its joint-centre
+    line (shoulder -> elbow, elbow -> wrist), so the points' principal axis is that line.
+
+    G1's own upper-arm points are 2-6 deg off the line (the shoulder-roll housing stands off
+    the arm's side); the tube's within 1 deg (its rings sample the circle evenly: the axis is
+    exact up to the sampling of the radius profile). The point count and each point's segment
+    and side stay; the points lie at the profile's radius, between 2 and 8 cm (G1's arms);
+    a bent elbow moves the forearm's tube, not the upper arm's.
+    """
+    T = Template(g1, n_points=2000, meshes=g1_meshes, link_density_exponent=0.5)
+    q = g1.q_reference.copy()
+    model = T.model
+
+    def axis_error(side: str, seg: str, a: str, b: str) -> float:
+        posed = T.pose(q, jacobians=False)
+        j0 = model.getJointId(f"{side}_{a}_joint")
+        mine = (T.point_segment == T.segment_names.index(seg)) & (T._ancestors[T.joint, j0] > 0)
+        X = posed.points[mine] - posed.points[mine].mean(0)
+        v = np.linalg.eigh(X.T @ X)[1][:, -1]
+        u = posed.p[model.getJointId(f"{side}_{b}_joint")] - posed.p[j0]
+        return float(np.degrees(np.arccos(min(abs(v @ u) / np.linalg.norm(u), 1.0))))
+
+    lines = [("upper_arm", "shoulder_roll", "elbow"), ("forearm", "elbow", "wrist_yaw")]
+    before = {(s, seg): axis_error(s, seg, a, b) for s in ("left", "right") for seg, a, b in lines}
+    count = {k: int((T.point_segment == T.segment_names.index(k)).sum()) for k in T.segment_names}
+    arms = [T.segment_names.index("upper_arm"), T.segment_names.index("forearm")]
+    replaced = T.limbs_as_tubes(q, arms)
+    assert replaced > 0.8 * (count["upper_arm"] + count["forearm"])
+    after = {(s, seg): axis_error(s, seg, a, b) for s in ("left", "right") for seg, a, b in lines}
+    assert max(before[(s, "upper_arm")] for s in ("left", "right")) > 2.0, before
+    assert max(after.values()) < 1.0, after
+    for k in T.segment_names:  # as many points per segment, within the rings' rounding
+        n = int((T.point_segment == T.segment_names.index(k)).sum())
+        assert abs(n - count[k]) <= 0.1 * count[k] + 12, (k, n, count[k])
+    posed = T.pose(q, jacobians=False)
+    for side in ("left", "right"):
+        sh = posed.p[model.getJointId(f"{side}_shoulder_roll_joint")]
+        el = posed.p[model.getJointId(f"{side}_elbow_joint")]
+        u = (el - sh) / np.linalg.norm(el - sh)
+        mine = (T.point_segment == arms[0]) & (
+            T._ancestors[T.joint, model.getJointId(f"{side}_shoulder_roll_joint")] > 0
+        )
+        d = posed.points[mine] - sh
+        rho = np.linalg.norm(d - np.outer(d @ u, u), axis=1)
+        assert 0.02 < rho.min() and rho.max() < 0.08, (rho.min(), rho.max())
+        assert np.sign(posed.points[mine][:, 1].mean()) == (1 if side == "left" else -1)
+    bent = q.copy()
+    elbow = model.getJointId("left_elbow_joint")
+    bent[model.joints[elbow].idx_q] += 0.5
+    moved = np.linalg.norm(T.pose(bent, jacobians=False).points - posed.points, axis=1) > 1e-9
+    upper_left = (T.point_segment == arms[0]) & (
+        T._ancestors[T.joint, model.getJointId("left_shoulder_roll_joint")] > 0
+    )
+    fore_left = (T.point_segment == arms[1]) & (T._ancestors[T.joint, elbow] > 0)
+    assert not moved[upper_left].any() and moved[fore_left].all()
