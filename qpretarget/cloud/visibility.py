@@ -26,16 +26,25 @@ SILHOUETTE_NEIGHBOURS = 16
 def _angular_cells(
     points: np.ndarray, eye: np.ndarray, cell: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Distance from ``eye`` (n,) and angular cell index (n,) of each point.
+    r"""Distance from ``eye`` (n,) and angular cell index (n,) of each point.
 
     Directions are binned in cells of ``cell`` metres at the points' median distance (azimuth
-    scaled by the cosine of the median elevation, so cells are about square).
+    scaled by the cosine of the median elevation, so cells are about square). Azimuths are
+    taken within half a turn of the points' mean direction (whole turns added or taken away):
+    ``arctan2``'s seam at :math:`\pm\pi` would otherwise split the cell column it runs
+    through, and points on its two sides would not hide one another (a person seen across the
+    world's -x axis). The cells' edges stay where they are, so nothing else moves.
     """
     d = points - eye
     r = np.linalg.norm(d, axis=1)
     r_med = float(np.median(r))
     ang = cell / max(r_med, 1e-6)
     az = np.arctan2(d[:, 1], d[:, 0])
+    mean = d.sum(axis=0)
+    if np.hypot(mean[0], mean[1]) > 0.0:
+        ref = float(np.arctan2(mean[1], mean[0]))
+        turn = 2.0 * np.pi
+        az = np.where(az < ref - np.pi, az + turn, np.where(az >= ref + np.pi, az - turn, az))
     el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
     cu = np.floor(az * np.cos(np.median(el)) / ang).astype(np.int64)
     cv = np.floor(el / ang).astype(np.int64)

@@ -136,7 +136,7 @@ def test_accuracy_script_reproduces_the_measure(tmp_path, mocap, g1):
     clip (6 clip frames after the lead-in, one template seed) writes its figures; the
     worst segment is the measure of the docs recomputed from the cached rendering's truth and
     a fit of the same config (1e-9 deg: same fit, same formula), within issue 23's 12 deg
-    (measured 10.4; 6.4 before the arms were tubes), and a bad --set fails with a one-line
+    (measured 10.5; 6.4 before the arms were tubes), and a bad --set fails with a one-line
     message before any work."""
     import json
     import subprocess

@@ -904,6 +904,29 @@ def test_visible_from_and_behind_cloud():
     assert not behind_cloud(points, near + [0.0, 1.0, 0.0], eye, 0.02)[n : 2 * n].any()
 
 
+def test_visible_from_across_the_azimuth_seam():
+    """Two points one behind the other, seen across the world's -x axis (``arctan2``'s seam at
+    +-pi) from the origin: the far one is hidden. Until stop 46 their azimuths, pi - 1e-4 and
+    -pi + 1e-4, fell in cells a whole turn apart and neither hid the other (``make-cloud``'s
+    sensor faces a person who faces +x across that seam: four of the six shared clips). The
+    cell size puts pi mid-cell (the cells' edges do not move with the fix), so the pair
+    shares a cell; the same pair turned 1 rad away from the seam gives the same answer.
+    """
+    from qpretarget.cloud.visibility import visible_from
+
+    d = 1e-4
+    near = 2.0 * np.array([-np.cos(d), np.sin(d), 0.0])  # azimuth pi - d
+    far = 2.5 * np.array([-np.cos(d), -np.sin(d), 0.0])  # azimuth -pi + d, 0.5 m deeper
+    r_med = 0.5 * (2.0 + 2.5)
+    cell = r_med * np.pi / 350.5  # pi / (cell / r_med) = 350.5: pi mid-cell (2.0 cm cells)
+    assert visible_from(np.vstack([near, far]), np.zeros(3), cell).tolist() == [True, False]
+    c, s = np.cos(-1.0), np.sin(-1.0)
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    turned = np.vstack([near, far]) @ Rz.T
+    cell = r_med * (np.pi - 1.0) / 250.5
+    assert visible_from(turned, np.zeros(3), cell).tolist() == [True, False]
+
+
 def test_occlusions_the_cloud_does_not_confirm_take_part(g1, g1_meshes, frame):
     """``em.occlusion_confirm``: trunk points the template's own raised arms hide take part
     when the cloud shows the arms down (nothing in front of them), not when it shows the

@@ -207,7 +207,7 @@ def test_feet_flat_and_pointing_like_the_human(g1, human_run):
 def test_second_clip_teapot_gestures(g1, mocap):
     """A second clip (CMU 29_03 teapot gestures, both arms moving), same setup and bound.
 
-    Measured: worst 7.2 deg (right upper arm; 4.7 / 5.4 / 4.0 deg the others); before the arms
+    Measured: worst 7.2 deg (right upper arm; 4.6 / 5.5 / 4.0 deg the others); before the arms
     were tubes (stop 46): 7.9 deg (right upper arm; 4.3 / 3.9 / 5.0 deg the others; 8.4 without the
     silhouette pulls, ``em.silhouette_weight: 0``; 11.1 without ``calibration.rigid_segments``
     either, 11.4 without ``em.occlusion_confirm`` either; 10.9 before the
@@ -235,7 +235,7 @@ def test_drink_at_the_sensor_rate(g1, mocap):
     """Issue 23's rate: the first second of CMU 14_37 at 30 Hz (``make-cloud``'s rendering:
     full Kinect V2 resolution, 5 mm noise, 5 % outliers, calibration lead-in), shipped config.
 
-    Measured: worst arm segment 9.8 deg (left upper arm, the fit's own); 10.4 without the
+    Measured: worst arm segment 9.9 deg (left upper arm, the fit's own); 10.2 without the
     silhouette pulls (``em.silhouette_weight: 0``), which must do worse here: that is what
     this clip shows of them. Before the arms were tubes (stop 46): 10.7 and 11.8 (stop 41's
     config) (over 3 s and 9 runs, the mean of the worst
@@ -273,9 +273,9 @@ def test_bend_and_scoop_at_the_sensor_rate(g1, mocap):
     """Issue 23's acceptance on a second clip: CMU 02_06 (bend, scoop, lift), its
     first 1.5 s at 30 Hz as ``make-cloud`` renders it, shipped config.
 
-    Measured: worst arm segment 10.1 deg (left upper arm; 10.0 without the silhouette pulls;
-    over 3 s and 9 runs with the arms as tubes 6.9-11.1 deg, and 12.5 on one of 6 runs of
-    two more renderings, docs/point_clouds.md, fifteenth round). Before the arms were tubes
+    Measured: worst arm segment 10.5 deg (left upper arm; 10.2 without the silhouette pulls;
+    over 3 s and 9 runs with the arms as tubes 6.7-11.2 deg, 15 runs of five renderings
+    within 12 deg, docs/point_clouds.md, fifteenth round). Before the arms were tubes
     (stop 46): 9.1 deg (left upper arm; 11.3 without the silhouette pulls,
     ``em.silhouette_weight: 0``; 11.6 without ``calibration.rigid_segments`` either, 11.0
     without ``em.occlusion_confirm`` too; 9.7 with the
