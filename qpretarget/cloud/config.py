@@ -508,7 +508,8 @@ def _section(cls: type, spec: Any, path: str) -> Any:
         elif key in ("rigid_segments", "limb_tubes"):
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise ConfigError(
-                    f"must be a list of segment names (e.g. [torso]), got {value!r}.",
+                    "must be a list of segment names (e.g. [torso], [upper_arm, forearm]), "
+                    f"got {value!r}.",
                     path=f"{path}.{key}",
                 )
         elif key == "centre_joints" and value is not None:

@@ -731,24 +731,17 @@ def test_personalize_segments_are_checked(g1, g1_template):
             robot=g1,
             template=g1_template,
         )
-    # calibration.rigid_segments likewise, under its own path.
-    with pytest.raises(ConfigError, match=r"calibration\.rigid_segments.*\[torso\]"):
-        CloudConfig.from_dict({"calibration": {"rigid_segments": "torso"}})
-    with pytest.raises(ConfigError, match=r"calibration\.rigid_segments.*'torsoo'.*'torso'"):
-        CloudRetargeter(
-            {"robot": "g1", "calibration": {"rigid_segments": ["torsoo"]}},
-            robot=g1,
-            template=g1_template,
-        )
-    # calibration.limb_tubes likewise.
-    with pytest.raises(ConfigError, match=r"calibration\.limb_tubes.*segment names"):
-        CloudConfig.from_dict({"calibration": {"limb_tubes": "upper_arm"}})
-    with pytest.raises(ConfigError, match=r"calibration\.limb_tubes.*'upperarm'.*'upper_arm'"):
-        CloudRetargeter(
-            {"robot": "g1", "calibration": {"limb_tubes": ["upperarm"]}},
-            robot=g1,
-            template=g1_template,
-        )
+    # calibration.rigid_segments and limb_tubes likewise, each under its own path.
+    for key, typo, name in (
+        ("rigid_segments", "torsoo", "torso"),
+        ("limb_tubes", "upperarm", "upper_arm"),
+    ):
+        with pytest.raises(ConfigError, match=rf"calibration\.{key}.*segment names.*\[torso\]"):
+            CloudConfig.from_dict({"calibration": {key: name}})
+        with pytest.raises(ConfigError, match=rf"calibration\.{key}.*'{typo}'.*'{name}'"):
+            CloudRetargeter(
+                {"robot": "g1", "calibration": {key: [typo]}}, robot=g1, template=g1_template
+            )
 
 
 def test_contact_height_releases_raised_soles(g1, frame):
