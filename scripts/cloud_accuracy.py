@@ -88,9 +88,7 @@ def _rendering(
             seed=seed,
             lead_in_speed=lead_in_speed,
         )
-        seq = syn.sequence
-        seq.meta["human_q"] = syn.q  # as make-cloud stores them
-        seq.meta["lead_in_frames"] = np.asarray(syn.lead_in_frames)
+        seq = syn.with_truth()  # as make-cloud stores it
         tmp = path.with_suffix(".tmp.npz")
         seq.save(tmp)
         tmp.replace(path)  # atomically: a parallel worker never reads half a file

@@ -502,6 +502,18 @@ class SyntheticSequence:
     camera: Camera
     lead_in_frames: int = 0
 
+    def with_truth(self) -> CloudSequence:
+        """The clouds with what ``make-cloud`` stores beside them.
+
+        ``meta/human_q`` (the rendered configurations, the truth the arm-direction error
+        scores against), ``meta/camera_position`` and ``meta/lead_in_frames``.
+        """
+        seq = self.sequence
+        seq.meta["human_q"] = self.q
+        seq.meta["camera_position"] = np.asarray(self.camera.position, float)
+        seq.meta["lead_in_frames"] = np.asarray(self.lead_in_frames)
+        return seq
+
 
 def render_sequence(
     model: pin.Model,

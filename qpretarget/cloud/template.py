@@ -504,12 +504,11 @@ class Template:
         if p0 is None:
             self.set_centre_rest(pin.neutral(self.model))
             p0 = self._p0
-        first = [int(g.max()) for g in self.articulations]  # the segment's own joint
-        up = [self._parent_articulation(a) for a in range(self.n_centres)]
+        first, below_of, up = self._articulation_tree()
         out = np.zeros((self.n_centres, 3))
         inner = np.zeros(self.n_centres, bool)
         for a, j in enumerate(first):
-            below = [b for b, u in enumerate(up) if u == a]
+            below = below_of[a]
             inner[a] = bool(below)
             if below:
                 d = np.mean([p0[first[b]] for b in below], axis=0) - p0[j]
@@ -519,6 +518,18 @@ class Template:
                 d = np.array([0.0, 0.0, 1.0])
             out[a] = d / max(np.linalg.norm(d), 1e-12)
         return out, inner
+
+    def _articulation_tree(self) -> tuple[list[int], list[list[int]], list[int]]:
+        """The articulations' tree.
+
+        Returns:
+            Each articulation's own joint (its segment's first), the articulations just below
+            it, and the one just above it (-1: none).
+        """
+        first = [int(g.max()) for g in self.articulations]
+        up = [self._parent_articulation(a) for a in range(self.n_centres)]
+        below = [[b for b, u in enumerate(up) if u == a] for a in range(self.n_centres)]
+        return first, below, up
 
     def _parent_articulation(self, a: int) -> int:
         """The articulation next up the tree from articulation ``a`` (-1: none below the root)."""
@@ -751,12 +762,11 @@ class Template:
         Returns:
             The number of points replaced.
         """
-        first = [int(g.max()) for g in self.articulations]
-        up = [self._parent_articulation(a) for a in range(self.n_centres)]
+        first, below_of, _ = self._articulation_tree()
         replaced = 0
         for a, j0 in enumerate(first):
             k = int(self.seg_of_joint[j0])
-            below = [b for b, u_ in enumerate(up) if u_ == a]
+            below = below_of[a]
             if k not in segments or not below:
                 continue
             posed = self.pose(q, jacobians=False)  # the points are re-sorted by each tube

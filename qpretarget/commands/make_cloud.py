@@ -76,12 +76,12 @@ def run(args: argparse.Namespace) -> int:
     out = check_output_file(args.output, ".npz")
     if not Path(args.clip).is_file():
         raise ConfigError(f"clip {args.clip!r} does not exist; give a .bvh, .amc or .c3d file.")
-    for name in ("rate", "distance", "lead_in_speed"):
-        if name == "lead_in_speed" and args.lead_in_speed is None:
-            continue
-        if not getattr(args, name) > 0:
-            flag = name.replace("_", "-")
-            raise ConfigError(f"--{flag} must be > 0, got {getattr(args, name)}.")
+    positive = {"--rate": args.rate, "--distance": args.distance}
+    if args.lead_in_speed is not None:
+        positive["--lead-in-speed"] = args.lead_in_speed
+    for flag, value in positive.items():
+        if not value > 0:
+            raise ConfigError(f"{flag} must be > 0, got {value}.")
     if args.noise < 0 or not 0 <= args.outliers < 1 or args.downscale < 1:
         raise ConfigError("need --noise >= 0, 0 <= --outliers < 1 and --downscale >= 1.")
     if args.start < 0 or args.duration < 0:
@@ -101,10 +101,7 @@ def run(args: argparse.Namespace) -> int:
         downscale=args.downscale,
         lead_in_speed=args.lead_in_speed,
     )
-    seq = syn.sequence
-    seq.meta["human_q"] = syn.q
-    seq.meta["camera_position"] = np.asarray(syn.camera.position, float)
-    seq.meta["lead_in_frames"] = np.asarray(syn.lead_in_frames)
+    seq = syn.with_truth()
     seq.save(out)
     counts = [len(f.points) for f in seq.frames]
     print(
