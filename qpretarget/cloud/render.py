@@ -19,6 +19,7 @@ the subject, so that they are a given fraction of the final cloud.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -350,6 +351,19 @@ class HumanPoser:
         "middle_thoracic_Y",
     )
 
+    #: Largest limb-direction error [deg] of the first frame posed from the neutral pose before
+    #: it is posed again from bent limbs (:meth:`_first_frame`).
+    FIRST_FRAME_TOLERANCE: float = 10.0
+    #: Elbow and knee angles [rad] of the other starts of the first frame, tried in order.
+    BENT_STARTS: tuple[float, ...] = (0.5, 1.0)
+    #: The joints :attr:`BENT_STARTS` bend (the human model's elbows and knees).
+    BENDING_JOINTS: tuple[str, ...] = (
+        "left_elbow_Z",
+        "right_elbow_Z",
+        "left_knee_Z",
+        "right_knee_Z",
+    )
+
     CHAINS: tuple[tuple[str, str], ...] = tuple(
         (c, p)
         for c, p in KEYPOINT_TREE.items()
@@ -461,7 +475,6 @@ class HumanPoser:
         q0 = pin.neutral(self.robot.model)
         q0[:3] = np.asarray(keypoints["waist"][0], float)
         q0[3:7] = pin.Quaternion(orientations["waist"][0] @ HUMAN_TO_Z_UP).coeffs()
-        ctrl.reset(q0)
         out = np.empty((T, self.robot.nq))
         for t in range(T):
             clip = {k: v[t] for k, v in keypoints.items()}
@@ -470,11 +483,68 @@ class HumanPoser:
                 for n in self.kmap.orientations
                 if n in orientations
             }
-            for _ in range(self.first_frame_ticks if t == 0 else self.ticks_per_frame):
-                targets: dict[str, np.ndarray] = dict(rot)
-                targets.update(self._targets(clip, np.asarray(ctrl.q)))
-                ctrl.step(targets)
+            if t == 0:
+                self._first_frame(q0, clip, rot)
+            else:
+                self._ticks(clip, rot, self.ticks_per_frame)
             out[t] = ctrl.q
+        return out
+
+    def _ticks(self, clip: Mapping[str, np.ndarray], rot: Mapping[str, np.ndarray], n: int) -> None:
+        ctrl = self.controller
+        for _ in range(n):
+            targets: dict[str, np.ndarray] = dict(rot)
+            targets.update(self._targets(clip, np.asarray(ctrl.q)))
+            ctrl.step(targets)
+
+    def _first_frame(
+        self, q0: np.ndarray, clip: Mapping[str, np.ndarray], rot: Mapping[str, np.ndarray]
+    ) -> None:
+        """Pose the clip's first frame from the neutral pose, else from bent limbs.
+
+        From the neutral pose the arms and legs are straight, where the direction an elbow or
+        a knee bends is undetermined: on CMU 01_01 (a forearm raised to the face) the first
+        frame settled with the shoulder's axial rotation at its limit and the trunk rolled
+        70 deg, 64 deg off the clip's forearm, and the next 50 frames stayed on that branch.
+        When the first frame ends more than :attr:`FIRST_FRAME_TOLERANCE` off the clip's limb
+        directions (:meth:`limb_errors`), it is posed again from each of
+        :attr:`BENT_STARTS` (the elbows and knees bent by that angle) and the start whose
+        pose follows the clip best is kept.
+        """
+        ctrl = self.controller
+        ctrl.reset(q0)
+        self._ticks(clip, rot, self.first_frame_ticks)
+        worst = float(self.limb_errors(np.asarray(ctrl.q), clip).max())
+        if worst <= self.FIRST_FRAME_TOLERANCE:
+            return
+        best = (worst, q0)
+        for bend in self.BENT_STARTS:
+            qs = q0.copy()
+            for name in self.BENDING_JOINTS:
+                qs[self.robot.joint_q_index[self.robot.joint_index(name)]] = bend
+            ctrl.reset(qs)
+            self._ticks(clip, rot, self.first_frame_ticks)
+            err = float(self.limb_errors(np.asarray(ctrl.q), clip).max())
+            if err < best[0]:
+                best = (err, qs)
+            if err <= self.FIRST_FRAME_TOLERANCE:
+                return
+        ctrl.reset(best[1])  # the best start again (the controller's warm start with it)
+        self._ticks(clip, rot, self.first_frame_ticks)
+
+    def limb_errors(self, q: np.ndarray, clip: Mapping[str, np.ndarray]) -> np.ndarray:
+        r"""Angles [deg] between the model's limb segments at ``q`` and the clip's (:attr:`CHAINS`).
+
+        The segment from each driven key-point's parent to it, model against clip:
+        :math:`\arccos(\hat a \cdot \hat b)`, in the order of :attr:`CHAINS`.
+        """
+        here = self.model_keypoints(q)
+        out = np.empty(len(self.CHAINS))
+        for i, (child, parent) in enumerate(self.CHAINS):
+            a = here[child] - here[parent]
+            b = np.asarray(clip[child], float) - np.asarray(clip[parent], float)
+            c = float(a @ b) / max(float(np.linalg.norm(a) * np.linalg.norm(b)), 1e-12)
+            out[i] = math.degrees(math.acos(max(-1.0, min(1.0, c))))
         return out
 
 

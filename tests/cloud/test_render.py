@@ -129,6 +129,32 @@ def test_the_move_into_the_clip_is_at_a_persons_pace(mocap):
     np.testing.assert_allclose(fixed.q[5:], syn.q[lead:], atol=1e-12)  # the same clip after it
 
 
+def test_the_first_frame_is_posed_from_bent_limbs_when_straight_ones_fail(mocap):
+    """The human model follows the clip's first frame even where the neutral pose's straight
+    elbows fail (``HumanPoser._first_frame``). CMU 01_01 (cgspeed's playground jumps) starts
+    with the left forearm raised to the face: from the neutral pose the first frame settled
+    with that forearm 64 deg off the clip's (the shoulder's axial rotation at its limit, the
+    trunk rolled) and the rendering stayed on that branch for 51 of 90 frames (limbs up to
+    128 deg off). Measured with the bent starts: every limb within 0.2 deg at the first frame
+    and within 1.0 deg over the first 3 s. Bounds: the first frame within
+    ``FIRST_FRAME_TOLERANCE`` (10 deg) on every limb, and with the bent starts taken away
+    (the former behaviour) above it, so the test fails without the fallback."""
+    from qpretarget.cloud.render import HumanPoser
+    from qpretarget.motion import load_motion
+    from qpretarget.motion.keypoints import keypoint_orientations, keypoint_positions
+
+    motion = load_motion(mocap / "cgspeed_cmu_01_01_playground_jumps.bvh")
+    kp = {k: v[:1] for k, v in keypoint_positions(motion).items()}
+    ori = {k: v[:1] for k, v in keypoint_orientations(motion).items()}
+    first = {k: v[0] for k, v in kp.items()}
+    poser = HumanPoser()
+    q = poser.pose_sequence(kp, ori)[0]
+    assert poser.limb_errors(q, first).max() <= HumanPoser.FIRST_FRAME_TOLERANCE
+    poser.BENT_STARTS = ()  # the neutral start alone
+    q_straight = poser.pose_sequence(kp, ori)[0]
+    assert poser.limb_errors(q_straight, first).max() > HumanPoser.FIRST_FRAME_TOLERANCE
+
+
 def test_noise_on_an_empty_view():
     """Nothing in view (the person walked past the sensor): an empty cloud, no outliers and no
     error (the outliers' box is the subject's, and there is none)."""
