@@ -29,6 +29,9 @@ away from the body), as retarget-cloud's calibration expects, and moves into the
 pose in 4 frames (the docs' figures), or at a person's pace with --lead-in-speed (a
 minimum-jerk move whose fastest key-point peaks at that speed; 2 m/s takes 0.4-2.3 s on the
 shared clips where the 4 frames move a hand at 2-7 m/s).
+The camera stands --distance in front of where the person starts, facing them; a clip that
+walks, jumps or kicks its way towards it (or out of its field of view) has it moved back along
+its line of sight until the person stays at least --min-distance away and inside the image.
 The person stands on the floor (z = 0) throughout: each frame's height is set by the model's
 lowest point within 1 s around it, not by the clip's root height (the performer's legs are not
 the model's), so that a jump keeps its flight and a crouch does not float.
@@ -48,6 +51,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--duration", type=float, default=3.0, help="length [s] (default 3; 0: to the end)"
     )
     p.add_argument("--distance", type=float, default=2.8, help="camera distance [m] (2.8)")
+    p.add_argument(
+        "--min-distance",
+        type=float,
+        default=2.0,
+        help="nearest a travelling person comes to the camera [m] (2.0): the camera is moved "
+        "back along its line of sight when the clip walks towards it or out of view",
+    )
     p.add_argument("--noise", type=float, default=0.005, help="range noise std [m] (0.005)")
     p.add_argument("--outliers", type=float, default=0.05, help="outlier fraction (0.05)")
     p.add_argument(
@@ -76,7 +86,11 @@ def run(args: argparse.Namespace) -> int:
     out = check_output_file(args.output, ".npz")
     if not Path(args.clip).is_file():
         raise ConfigError(f"clip {args.clip!r} does not exist; give a .bvh, .amc or .c3d file.")
-    positive = {"--rate": args.rate, "--distance": args.distance}
+    positive = {
+        "--rate": args.rate,
+        "--distance": args.distance,
+        "--min-distance": args.min_distance,
+    }
     if args.lead_in_speed is not None:
         positive["--lead-in-speed"] = args.lead_in_speed
     for flag, value in positive.items():
@@ -95,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
         start=args.start,
         duration=args.duration if args.duration > 0 else None,
         distance=args.distance,
+        min_distance=args.min_distance,
         noise=args.noise,
         outlier_fraction=args.outliers,
         seed=args.seed,
@@ -109,4 +124,16 @@ def run(args: argparse.Namespace) -> int:
         f"calibration posture moving into the clip), {int(np.median(counts))} points per "
         "frame (median)"
     )
+    if syn.camera_shift > 0:
+        print(
+            f"the clip travels towards the camera or out of its view: camera moved back "
+            f"{syn.camera_shift:.2f} m (to {args.distance + syn.camera_shift:.2f} m from the "
+            f"person's start), the person at least {args.min_distance:g} m from it"
+        )
+    if syn.limb_error_deg is not None and len(syn.limb_error_deg):
+        worst = float(np.max(syn.limb_error_deg))
+        print(
+            f"the rendered person follows the clip's upper arms, forearms, thighs and shanks "
+            f"within {worst:.1f} deg (worst frame; meta/limb_error_deg per frame)"
+        )
     return 0

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+import pytest
 
 from qpretarget.cloud.io import PinholeIntrinsics
 from qpretarget.cloud.render import corrupt, look_at, rasterize, render_depth
+from qpretarget.errors import ConfigError
 
 INTR = PinholeIntrinsics(fx=80.0, fy=80.0, cx=39.5, cy=29.5, width=80, height=60)
 
@@ -153,6 +155,55 @@ def test_the_first_frame_is_posed_from_bent_limbs_when_straight_ones_fail(mocap)
     poser.BENT_STARTS = ()  # the neutral start alone
     q_straight = poser.pose_sequence(kp, ori)[0]
     assert poser.limb_errors(q_straight, first).max() > HumanPoser.FIRST_FRAME_TOLERANCE
+
+
+def test_camera_setback_keeps_a_travelling_person_in_view():
+    """``camera_setback``: the smallest move back along the camera's line of sight that puts
+    every pelvis position at least ``min_distance`` in front of it and inside the image with
+    ``BODY_HALF_WIDTH`` to spare (exact to 1e-9 m on these positions: the bound's formula).
+    A camera 2.8 m in front of x = 0 looking along -x: a person standing still needs none; one
+    walking 3 m towards it needs 3 - 2.8 + 2 = 2.2 m; one stepping 2.5 m sideways at 2.8 m
+    needs (2.5 + 0.5) / tan(alpha) - 2.8."""
+    from qpretarget.cloud.render import BODY_HALF_WIDTH, camera_setback, kinect_camera
+
+    cam = kinect_camera([2.8, 0.0, 1.2], [0.0, 0.0, 0.9])
+    still = np.array([[0.0, 0.0, 1.0], [0.05, 0.02, 1.0]])
+    assert camera_setback(cam, still, min_distance=2.0) == 0.0
+    walk = np.array([[x, 0.0, 1.0] for x in np.linspace(0.0, 3.0, 31)])
+    assert abs(camera_setback(cam, walk, min_distance=2.0) - 2.2) < 1e-9
+    side = np.array([[0.0, y, 1.0] for y in np.linspace(0.0, 2.5, 11)])
+    intr = cam.intrinsics
+    tan_a = min(intr.cx, intr.width - intr.cx) / intr.fx
+    expected = (2.5 + BODY_HALF_WIDTH) / tan_a - 2.8
+    assert abs(camera_setback(cam, side, min_distance=2.0) - expected) < 1e-9
+    with pytest.raises(ConfigError, match="min_distance"):
+        camera_setback(cam, walk, min_distance=0.0)
+
+
+def test_a_walk_towards_the_camera_stays_in_view(mocap):
+    """``make-cloud``'s camera moves back for a clip that travels towards it. CMU 16_15 walks
+    3.1 m in 3 s straight at the camera placed 2.8 m in front of its start: before, the walker
+    passed through it after 2.5 s (frames without a point, held by the fit, arms 130-150 deg
+    off); now the camera stands 2.49 m further back, every frame shows the person, the pelvis
+    at least 2.0 m in front of the camera (to 1e-6 m), and the fit's worst arm segment was
+    5.3-6.9 deg (docs/point_clouds.md). A clip that stays in place (CMU 14_37, drink) is
+    rendered from the 2.8 m it always was: no move, the same camera."""
+    from qpretarget.cloud.render import clip_cloud_sequence
+
+    syn, _ = clip_cloud_sequence(mocap / "cmu_16_15_walk.bvh", rate=30.0, duration=3.0, downscale=8)
+    assert syn.camera_shift > 2.0
+    assert min(len(f.points) for f in syn.sequence.frames) > 20  # 64x fewer pixels than make-cloud
+    R = syn.camera.pose[:3, :3]
+    f = R[:, 2].copy()
+    f[2] = 0.0
+    f /= np.linalg.norm(f)
+    depth = (syn.q[:, :3] - syn.camera.position) @ f
+    assert depth.min() >= 2.0 - 1e-6
+    assert syn.limb_error_deg is not None and syn.limb_error_deg.max() < 5.0  # the walk's 0.8
+    still, _ = clip_cloud_sequence(
+        mocap / "cmu_14_37_drink_soda.bvh", rate=30.0, duration=0.3, downscale=8
+    )
+    assert still.camera_shift == 0.0
 
 
 def test_noise_on_an_empty_view():
