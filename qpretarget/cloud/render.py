@@ -312,6 +312,12 @@ HUMAN_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 HUMAN_URDF = "example-robot-data:human_description/robots/human.urdf"
 
 
+def _worst(errors: np.ndarray) -> float:
+    """The largest of ``errors`` that is known (0 when none is)."""
+    known = errors[np.isfinite(errors)]
+    return float(known.max()) if len(known) else 0.0
+
+
 class HumanPoser:
     """Pose example-robot-data's ``human_description`` model from a mocap clip's key-points.
 
@@ -459,12 +465,28 @@ class HumanPoser:
         return {c: float(np.linalg.norm(kp[c] - kp[p])) for c, p in KEYPOINT_TREE.items()}
 
     def _targets(self, clip: Mapping[str, np.ndarray], q: np.ndarray) -> dict[str, np.ndarray]:
+        """Each driven key-point's target: its parent's plus the model's length along the clip.
+
+        A limb segment the clip does not give (marker data without arms, a marker hidden at
+        this frame: missing or NaN at either end) is not driven: its target is where the model
+        has it, so it stays as it is (hanging from the neutral pose for a clip without it).
+        """
         here = self.model_keypoints(q)
-        out: dict[str, np.ndarray] = {"waist": np.asarray(clip["waist"], float)}
+        waist = np.asarray(clip["waist"], float)
+        out: dict[str, np.ndarray] = {
+            "waist": waist if np.all(np.isfinite(waist)) else here["waist"]
+        }
         for child, parent in self.CHAINS:  # parents come first
+            if child not in clip or parent not in clip:
+                out[child] = here[child]
+                continue
             d = np.asarray(clip[child], float) - np.asarray(clip[parent], float)
+            n = float(np.linalg.norm(d))
+            if not (math.isfinite(n) and n > 1e-9):
+                out[child] = here[child]
+                continue
             base = out.get(parent, here[parent])
-            out[child] = base + self.lengths[child] * d / max(float(np.linalg.norm(d)), 1e-9)
+            out[child] = base + self.lengths[child] * d / n
         return out
 
     def pose_sequence(
@@ -494,17 +516,17 @@ class HumanPoser:
         worst = np.empty(T)
         for t in range(T):
             clip = {k: v[t] for k, v in keypoints.items()}
-            rot = {
+            rot = {  # a frame without an orientation (marker gaps) keeps the last target
                 f"{n}_orientation": orientations[n][t] @ HUMAN_TO_Z_UP
                 for n in self.kmap.orientations
-                if n in orientations
+                if n in orientations and np.all(np.isfinite(orientations[n][t]))
             }
             if t == 0:
                 self._first_frame(q0, clip, rot)
             else:
                 self._ticks(clip, rot, self.ticks_per_frame)
             out[t] = ctrl.q
-            worst[t] = self.limb_errors(out[t], clip).max()
+            worst[t] = _worst(self.limb_errors(out[t], clip))
         self.limb_error_deg = worst
         return out
 
@@ -532,7 +554,7 @@ class HumanPoser:
         ctrl = self.controller
         ctrl.reset(q0)
         self._ticks(clip, rot, self.first_frame_ticks)
-        worst = float(self.limb_errors(np.asarray(ctrl.q), clip).max())
+        worst = _worst(self.limb_errors(np.asarray(ctrl.q), clip))
         if worst <= self.FIRST_FRAME_TOLERANCE:
             return
         best = (worst, q0)
@@ -542,7 +564,7 @@ class HumanPoser:
                 qs[self.robot.joint_q_index[self.robot.joint_index(name)]] = bend
             ctrl.reset(qs)
             self._ticks(clip, rot, self.first_frame_ticks)
-            err = float(self.limb_errors(np.asarray(ctrl.q), clip).max())
+            err = _worst(self.limb_errors(np.asarray(ctrl.q), clip))
             if err < best[0]:
                 best = (err, qs)
             if err <= self.FIRST_FRAME_TOLERANCE:
@@ -554,14 +576,20 @@ class HumanPoser:
         r"""Angles [deg] between the model's limb segments at ``q`` and the clip's.
 
         Each segment from its parent key-point to its child, model against clip:
-        :math:`\arccos(\hat a \cdot \hat b)`, in the order of :attr:`SEGMENTS`.
+        :math:`\arccos(\hat a \cdot \hat b)`, in the order of :attr:`SEGMENTS`; NaN for a
+        segment the clip does not give at this frame (missing or NaN key-points).
         """
         here = self.model_keypoints(q)
-        out = np.empty(len(self.SEGMENTS))
+        out = np.full(len(self.SEGMENTS), np.nan)  # NaN: a segment the clip does not give
         for i, (child, parent) in enumerate(self.SEGMENTS):
+            if child not in clip or parent not in clip:
+                continue
             a = here[child] - here[parent]
             b = np.asarray(clip[child], float) - np.asarray(clip[parent], float)
-            c = float(a @ b) / max(float(np.linalg.norm(a) * np.linalg.norm(b)), 1e-12)
+            nb = float(np.linalg.norm(b))
+            if not (math.isfinite(nb) and nb > 1e-9):
+                continue
+            c = float(a @ b) / max(float(np.linalg.norm(a)) * nb, 1e-12)
             out[i] = math.degrees(math.acos(max(-1.0, min(1.0, c))))
         return out
 
@@ -873,7 +901,77 @@ def clip_cloud_sequence(
     idx = np.searchsorted(0.5 * (t[1:] + t[:-1]), ticks)  # the nearest clip frame
     kp = {k: v[idx] for k, v in keypoint_positions(motion).items()}
     ori = {k: v[idx] for k, v in keypoint_orientations(motion).items()}
+    ori = trunk_orientations(kp, ori, times=ticks - t[0], source=str(clip))
     return human_clip_sequence(kp, ori, ticks - ticks[0], downscale=downscale, **render)
+
+
+def trunk_orientations(
+    keypoints: Mapping[str, np.ndarray],
+    orientations: Mapping[str, np.ndarray],
+    *,
+    times: np.ndarray | None = None,
+    source: str = "the clip",
+) -> dict[str, np.ndarray]:
+    r"""The waist's and torso's orientations a clip gives, else from its key-points (markers).
+
+    BVH and ASF/AMC clips carry joint orientations; marker data (C3D) has positions only. For
+    a missing ``waist`` orientation, :func:`~qpretarget.motion.calibration.triad` of the hips
+    (:math:`\hat y` right to left) and the waist-to-neck line (:math:`\hat z`, made
+    orthogonal), :math:`x = y \times z`; the shoulders stand in for the hips when the clip
+    has no hips. The ``torso`` likewise from the shoulders (else the hips), the ``head`` is
+    the torso's. A person standing upright facing +x gets the identity, the rest pose
+    :class:`HumanPoser` expects.
+
+    Raises:
+        ConfigError: the clip has no waist or neck key-point, or neither both hips nor both
+            shoulders (one-arm marker sets: the trunk's heading is unknown), or they are not
+            seen at its first frame.
+    """
+    from ..motion.calibration import triad
+
+    out = {k: np.asarray(v, float) for k, v in orientations.items()}
+    if "waist" in out and "torso" in out:
+        return out
+    pairs = [
+        (f"left_{p}", f"right_{p}")
+        for p in ("hip", "shoulder")
+        if f"left_{p}" in keypoints and f"right_{p}" in keypoints
+    ]
+    missing = [k for k in ("waist", "neck") if k not in keypoints]
+    if missing or not pairs:
+        have = ", ".join(sorted(keypoints)) or "none"
+        raise ConfigError(
+            f"{source} has no joint orientations, and its key-points ({have}) do not give the "
+            "trunk's: need the waist and the neck, and both hips or both shoulders"
+            + (f" (missing: {', '.join(missing)})" if missing else "")
+            + ". A full-body clip (BVH, ASF/AMC, or markers on both sides) renders; a one-arm "
+            "marker set does not."
+        )
+
+    def frame(left: str, right: str) -> np.ndarray:
+        return triad(keypoints[left], keypoints[right], keypoints["waist"], keypoints["neck"])
+
+    hips = frame(*pairs[0])
+    chest = frame(*pairs[-1])
+    seen = np.all(np.isfinite(hips), axis=(1, 2)) & np.all(np.isfinite(chest), axis=(1, 2))
+    if not seen[0]:
+        names = ", ".join(dict.fromkeys([*pairs[0], *pairs[-1], "waist", "neck"]))
+        when = (
+            "they are never all seen in the frames asked for"
+            if not seen.any()
+            else f"they are first all seen {float(times[np.argmax(seen)]):.2f} s into the clip: "
+            f"--start {float(times[np.argmax(seen)]):.2f}"
+            if times is not None
+            else f"they are first all seen at frame {int(np.argmax(seen))}"
+        )
+        raise ConfigError(
+            f"{source}: the trunk's key-points ({names}) are not all seen at the first frame "
+            f"(marker gaps), so the person's first pose is unknown; {when}."
+        )
+    out.setdefault("waist", hips)
+    out.setdefault("torso", chest)
+    out.setdefault("head", out["torso"])
+    return out
 
 
 def _visible_joints(

@@ -23,6 +23,8 @@ HELP = """examples:
       5 s from 2 s into the clip, 10 mm range noise
   qpretarget make-cloud clip.bvh -o clouds.npz --lead-in-speed 2
       move into the clip at a person's pace (hands at most 2 m/s)
+  qpretarget make-cloud ../shared/data/mocap/opensim_walking2.c3d -o clouds.npz --start 1.7
+      marker data: from when its trunk markers are seen
 
 The sequence starts with the calibration posture (stand facing the sensor, arms slightly
 away from the body), as retarget-cloud's calibration expects, and moves into the clip's first
@@ -35,6 +37,9 @@ its line of sight until the person stays at least --min-distance away and inside
 The person stands on the floor (z = 0) throughout: each frame's height is set by the model's
 lowest point within 1 s around it, not by the clip's root height (the performer's legs are not
 the model's), so that a jump keeps its flight and a crouch does not float.
+Marker data (C3D) has no joint orientations: the trunk's come from the hips (or shoulders)
+and the waist-to-neck line, and limbs without markers stay as the model's neutral pose has
+them; a clip whose trunk markers are not seen at --start says from when they are.
 The human model's configurations are stored with the clouds (meta/human_q) as the truth.
 Layout of the file and how the rendering works: docs/point_clouds.md
 """

@@ -206,6 +206,38 @@ def test_a_walk_towards_the_camera_stays_in_view(mocap):
     assert still.camera_shift == 0.0
 
 
+def test_trunk_orientations_from_markers():
+    """``trunk_orientations`` for a clip without joint orientations: an upright person facing
+    +x gets the identity (the rest pose ``HumanPoser`` expects), one turned by 90 deg about
+    the vertical gets that turn, to 1e-12 (exact rotations of exact points); orientations a
+    clip has are kept; without hips the shoulders give the waist's."""
+    from qpretarget.cloud.render import trunk_orientations
+    from qpretarget.motion.calibration import rotation_z
+
+    base = {
+        "waist": [0.0, 0.0, 1.0],
+        "neck": [0.0, 0.0, 1.5],
+        "left_hip": [0.0, 0.1, 0.95],
+        "right_hip": [0.0, -0.1, 0.95],
+        "left_shoulder": [0.0, 0.2, 1.45],
+        "right_shoulder": [0.0, -0.2, 1.45],
+    }
+    R = rotation_z(np.pi / 2)
+    kp = {k: np.array([v, R @ np.array(v)]) for k, v in base.items()}  # (2, 3): two frames
+    ori = trunk_orientations(kp, {})
+    for name in ("waist", "torso", "head"):
+        np.testing.assert_allclose(ori[name][0], np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(ori[name][1], R, atol=1e-12)
+    given = {"waist": np.array([R, R]), "torso": np.array([R, R])}
+    kept = trunk_orientations(kp, given)
+    np.testing.assert_array_equal(kept["waist"], given["waist"])
+    np.testing.assert_array_equal(kept["torso"], given["torso"])
+    no_hips = {k: v for k, v in kp.items() if "hip" not in k}
+    np.testing.assert_allclose(trunk_orientations(no_hips, {})["waist"][1], R, atol=1e-12)
+    with pytest.raises(ConfigError, match="both hips or both shoulders"):
+        trunk_orientations({k: v for k, v in no_hips.items() if "left" not in k}, {})
+
+
 def test_noise_on_an_empty_view():
     """Nothing in view (the person walked past the sensor): an empty cloud, no outliers and no
     error (the outliers' box is the subject's, and there is none)."""
