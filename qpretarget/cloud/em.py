@@ -98,6 +98,7 @@ from .estep import EStep, _Neighbours, e_step, search_coordinates
 from .io import (
     CloudFrame,
     CloudSequence,
+    crop_hint,
     estimate_normals,
     normals_in_background,
     prepare_cloud,
@@ -442,7 +443,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         if len(S) < MIN_CLOUD_POINTS:
             raise TooFewPoints(
                 f"only {len(S)} cloud points left after cropping; check input.crop and the "
-                "world frame (z up, floor at z = 0).",
+                "world frame (z up, floor at z = 0)." + crop_hint(pts, box),
                 path="input.crop",
             )
         if Sn is None and self.config.em.refine_iterations > 0:

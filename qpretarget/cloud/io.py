@@ -24,7 +24,7 @@ averages the points of each voxel and draws a fixed-size random subset.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, overload
@@ -237,6 +237,30 @@ def crop(points: np.ndarray, box_min: Sequence[float], box_max: Sequence[float])
         c = points[:, a]
         out &= (c >= lo[a]) & (c <= hi[a])
     return out
+
+
+def crop_hint(points: np.ndarray, box: Mapping[str, Sequence[float]] | None) -> str:
+    """Where a frame's points are, when a crop box left too few of them: a sentence.
+
+    Names the median of the finite points and a box of the crop's own size centred on it
+    horizontally (its heights kept), to paste into ``input.crop``; empty when the frame has
+    too few points anyway (then the crop is not the cause).
+    """
+    pts = np.asarray(points, float).reshape(-1, 3)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if len(pts) < 10 or not box:
+        return ""
+    lo, hi = np.asarray(box["min"], float), np.asarray(box["max"], float)
+    med = np.median(pts, axis=0)
+    half = 0.5 * (hi[:2] - lo[:2])
+    new_lo = [round(float(med[0] - half[0]), 2), round(float(med[1] - half[1]), 2), float(lo[2])]
+    new_hi = [round(float(med[0] + half[0]), 2), round(float(med[1] + half[1]), 2), float(hi[2])]
+    return (
+        f" The frame's {len(pts)} points have their median at "
+        f"({med[0]:.2f}, {med[1]:.2f}, {med[2]:.2f}) m, and the crop keeps "
+        f"{[float(x) for x in lo]} - {[float(x) for x in hi]}: if that is the person, centre "
+        f"the box on them, e.g. crop: {{min: {new_lo}, max: {new_hi}}}."
+    )
 
 
 def voxel_downsample(

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pinocchio as pin
 import pytest
+import yaml
 
 from qpretarget.cloud.em import CloudRetargeter, e_step
 from qpretarget.cloud.io import CloudFrame
@@ -869,6 +870,22 @@ def test_a_frame_without_the_person_holds_the_last_pose(g1, g1_template, g1_sequ
     first = CloudSequence([empty] + list(seq.frames[1:3]), sensor_position=seq.sensor_position)
     with pytest.raises(TooFewPoints, match=r"input\.crop.*only 0 cloud points"):
         CloudRetargeter(cfg, robot=g1, template=g1_template).run(first)
+    # A person outside the crop box (a clip far from the world origin): the error says where
+    # the points are and gives a box of the crop's size around them, which then fits.
+    far = [CloudFrame(f.points + [9.0, 0.0, 0.0], t=f.t) for f in seq.frames[:3]]
+    boxed = {**cfg, "input": {**cfg["input"], "crop": {"min": [-4, -4, 0.02], "max": [4, 4, 2.5]}}}
+    with pytest.raises(TooFewPoints, match=r"median at \(9\.") as info:
+        CloudRetargeter(boxed, robot=g1, template=g1_template).run(
+            CloudSequence(far, sensor_position=seq.sensor_position + [9.0, 0.0, 0.0])
+        )
+    hint = str(info.value).split("e.g. crop: ")[1].rstrip(".")
+    box = yaml.safe_load(hint)
+    assert box["max"][0] - box["min"][0] == pytest.approx(8.0, abs=0.011)  # the crop's size
+    moved = {**cfg, "input": {**cfg["input"], "crop": box}}
+    _, ok = CloudRetargeter(moved, robot=g1, template=g1_template).run(
+        CloudSequence(far, sensor_position=seq.sensor_position + [9.0, 0.0, 0.0])
+    )
+    assert all(r.status == "ok" for r in ok)
 
 
 def test_visible_from_and_behind_cloud():
