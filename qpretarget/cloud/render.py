@@ -312,6 +312,15 @@ HUMAN_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 HUMAN_URDF = "example-robot-data:human_description/robots/human.urdf"
 
 
+def _bar(total: int, desc: str, on: bool) -> Any:
+    """A tqdm progress bar of ``total`` frames on stderr, or None when ``on`` is False."""
+    if not on:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="frame", desc=desc, leave=False)
+
+
 def _worst(errors: np.ndarray) -> float:
     """The largest of ``errors`` that is known (0 when none is)."""
     known = errors[np.isfinite(errors)]
@@ -493,6 +502,8 @@ class HumanPoser:
         self,
         keypoints: Mapping[str, np.ndarray],
         orientations: Mapping[str, np.ndarray],
+        *,
+        progress: bool = False,
     ) -> np.ndarray:
         """Configurations (T, nq) of the model following a clip.
 
@@ -506,6 +517,7 @@ class HumanPoser:
                 ``keypoint_positions(motion)``.
             orientations: ``waist``/``torso``/``head`` -> (T, 3, 3) world rotations relative to the
                 clip's rest pose facing +x (``keypoint_orientations(motion)``).
+            progress: a progress bar on stderr.
         """
         T = len(next(iter(keypoints.values())))
         ctrl = self.controller
@@ -514,6 +526,7 @@ class HumanPoser:
         q0[3:7] = pin.Quaternion(orientations["waist"][0] @ HUMAN_TO_Z_UP).coeffs()
         out = np.empty((T, self.robot.nq))
         worst = np.empty(T)
+        bar = _bar(T, "posing", progress)
         for t in range(T):
             clip = {k: v[t] for k, v in keypoints.items()}
             rot = {  # a frame without an orientation (marker gaps) keeps the last target
@@ -527,6 +540,10 @@ class HumanPoser:
                 self._ticks(clip, rot, self.ticks_per_frame)
             out[t] = ctrl.q
             worst[t] = _worst(self.limb_errors(out[t], clip))
+            if bar is not None:
+                bar.update(1)
+        if bar is not None:
+            bar.close()
         self.limb_error_deg = worst
         return out
 
@@ -650,11 +667,16 @@ def render_sequence(
     noise: float = 0.005,
     outlier_fraction: float = 0.05,
     seed: int = 0,
+    progress: bool = False,
 ) -> SyntheticSequence:
-    """Render configurations ``q`` (T, nq) at times ``t`` (T,) into a noisy cloud sequence."""
+    """Render configurations ``q`` (T, nq) at times ``t`` (T,) into a noisy cloud sequence.
+
+    ``progress``: a progress bar on stderr.
+    """
     rng = np.random.default_rng(seed)
     data = model.createData()
     frames, link, normals, clean = [], [], [], []
+    bar = _bar(len(q), "rendering", progress)
     for k in range(len(q)):
         pin.forwardKinematics(model, data, q[k])
         out = render_cloud(
@@ -664,6 +686,10 @@ def render_sequence(
         link.append(out["link"])
         normals.append(out["normals"])
         clean.append(out["clean"])
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     seq = CloudSequence(frames, sensor_position=camera.position, source="synthetic")
     return SyntheticSequence(seq, np.asarray(q, float), link, normals, clean, meshes, camera)
 
@@ -740,6 +766,7 @@ def human_clip_sequence(
     poser: HumanPoser | None = None,
     downscale: int = 2,
     ground_window: float = 1.0,
+    progress: bool = False,
 ) -> tuple[SyntheticSequence, HumanPoser]:
     r"""The human model posed by a clip, rendered by a Kinect-like camera in front of it.
 
@@ -786,10 +813,11 @@ def human_clip_sequence(
             the person at 2.8 m; 1: about 9,000).
         ground_window: the window [s] over which the lowest point of the model is put on the
             floor.
+        progress: progress bars (posing, rendering) on stderr.
     """
     poser = poser if poser is not None else HumanPoser()
     h = poser.robot
-    Q = poser.pose_sequence(keypoints, orientations)
+    Q = poser.pose_sequence(keypoints, orientations, progress=progress)
     fwd = np.asarray(orientations["waist"][0], float)[:, 0].copy()
     fwd[2] = 0.0
     fwd /= np.linalg.norm(fwd)
@@ -848,6 +876,7 @@ def human_clip_sequence(
         noise=noise,
         outlier_fraction=outlier_fraction,
         seed=seed,
+        progress=progress,
     )
     syn.lead_in_frames = len(lead)
     syn.camera_shift = shift

@@ -75,6 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="move into the clip with no key-point faster than this [m/s] (default: 4 frames)",
     )
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
 
@@ -120,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         downscale=args.downscale,
         lead_in_speed=args.lead_in_speed,
+        progress=not args.no_progress,
     )
     seq = syn.with_truth()
     seq.save(out)
