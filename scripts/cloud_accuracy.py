@@ -119,7 +119,7 @@ def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> d
     from qpretarget.cloud.em import CloudRetargeter
     from qpretarget.cloud.io import read_cloud_sequence
     from qpretarget.cloud.measures import arm_direction_errors, arm_direction_summary
-    from qpretarget.cloud.render import HumanPoser
+    from qpretarget.cloud.poser import HumanPoser
 
     seq = read_cloud_sequence(_rendering(clip, frames, render_seed, Path(cache), lead_in_speed))
     g1 = qp.load_robot("g1")

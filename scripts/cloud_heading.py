@@ -121,7 +121,7 @@ def probe(
     from qpretarget.cloud.config import CloudConfig
     from qpretarget.cloud.em import CloudRetargeter
     from qpretarget.cloud.io import read_cloud_sequence
-    from qpretarget.cloud.render import HumanPoser
+    from qpretarget.cloud.poser import HumanPoser
 
     seq = read_cloud_sequence(_rendering(clip, frames, render_seed, cache))
     bad = [k for k in at if not 0 < k < len(seq.frames)]

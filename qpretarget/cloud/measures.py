@@ -25,7 +25,7 @@ import pinocchio as pin
 if TYPE_CHECKING:
     from ..robot import RobotModel
     from ..trajectory import RobotTrajectory
-    from .render import HumanPoser
+    from .poser import HumanPoser
 
 #: Issue 23's acceptance: every arm segment within this of the person's [deg].
 ARM_TOLERANCE_DEG = 12.0
@@ -52,7 +52,7 @@ def arm_direction_errors(
     Args:
         robot: the robot (its ``keyframes`` name the shoulder, elbow and wrist frames).
         q_robot: (T, nq) robot configurations (the run file's ``q``).
-        poser: the :class:`~qpretarget.cloud.render.HumanPoser` that posed the rendered model.
+        poser: the :class:`~qpretarget.cloud.poser.HumanPoser` that posed the rendered model.
         q_human: (T, nq_h) configurations of the rendered human model (``SyntheticSequence.q``).
 
     Returns:
@@ -144,7 +144,7 @@ def run_arm_direction_errors(
             f"{HUMAN_Q_KEY} has {human_q.shape[0]} frames, the run {len(traj.q)}: the run file "
             "was edited; write it again with retarget-cloud"
         )
-    from .render import HumanPoser
+    from .poser import HumanPoser
 
     if robot is None:
         robot = traj.make_controller().robot

@@ -83,7 +83,7 @@ def test_make_cloud_then_retarget_cloud(tmp_path, mocap, g1, capsys):
 
     from qpretarget.cloud.io import read_cloud_sequence
     from qpretarget.cloud.measures import arm_direction_errors
-    from qpretarget.cloud.render import HumanPoser
+    from qpretarget.cloud.poser import HumanPoser
 
     clouds, run = tmp_path / "clouds.npz", tmp_path / "run.npz"
     clip = str(mocap / "cmu_14_37_drink_soda.bvh")
@@ -179,7 +179,7 @@ def test_accuracy_script_reproduces_the_measure(tmp_path, mocap, g1):
     from qpretarget.cloud.em import CloudRetargeter
     from qpretarget.cloud.io import read_cloud_sequence
     from qpretarget.cloud.measures import arm_direction_errors
-    from qpretarget.cloud.render import HumanPoser
+    from qpretarget.cloud.poser import HumanPoser
 
     root = Path(__file__).resolve().parents[2]
     script, out, cache = root / "scripts" / "cloud_accuracy.py", tmp_path / "acc.json", tmp_path

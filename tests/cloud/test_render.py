@@ -141,7 +141,7 @@ def test_the_first_frame_is_posed_from_bent_limbs_when_straight_ones_fail(mocap)
     and within 1.0 deg over the first 3 s. Bounds: the first frame within
     ``FIRST_FRAME_TOLERANCE`` (10 deg) on every limb, and with the bent starts taken away
     (the former behaviour) above it, so the test fails without the fallback."""
-    from qpretarget.cloud.render import HumanPoser
+    from qpretarget.cloud.poser import HumanPoser
     from qpretarget.motion import load_motion
     from qpretarget.motion.keypoints import keypoint_orientations, keypoint_positions
 
@@ -211,7 +211,7 @@ def test_trunk_orientations_from_markers():
     +x gets the identity (the rest pose ``HumanPoser`` expects), one turned by 90 deg about
     the vertical gets that turn, to 1e-12 (exact rotations of exact points); orientations a
     clip has are kept; without hips the shoulders give the waist's."""
-    from qpretarget.cloud.render import trunk_orientations
+    from qpretarget.cloud.poser import trunk_orientations
     from qpretarget.motion.calibration import rotation_z
 
     base = {
