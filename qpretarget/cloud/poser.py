@@ -241,7 +241,7 @@ class HumanPoser:
         q0[3:7] = pin.Quaternion(orientations["waist"][0] @ HUMAN_TO_Z_UP).coeffs()
         out = np.empty((T, self.robot.nq))
         worst = np.empty(T)
-        bar = _bar(T, "posing", progress)
+        bar = progress_bar(T, "posing", progress)
         for t in range(T):
             clip = {k: v[t] for k, v in keypoints.items()}
             rot = {  # a frame without an orientation (marker gaps) keeps the last target
@@ -326,7 +326,7 @@ class HumanPoser:
         return out
 
 
-def _bar(total: int, desc: str, on: bool) -> Any:
+def progress_bar(total: int, desc: str, on: bool) -> Any:
     """A tqdm progress bar of ``total`` frames on stderr, or None when ``on`` is False."""
     if not on:
         return None

@@ -33,8 +33,8 @@ from .meshes import LinkMeshes, load_link_meshes
 from .poser import (
     HUMAN_TO_Z_UP,
     HumanPoser,
-    _bar,
     interpolation_peak_rate,
+    progress_bar,
     trunk_orientations,
 )
 
@@ -366,7 +366,7 @@ def render_sequence(
     rng = np.random.default_rng(seed)
     data = model.createData()
     frames, link, normals, clean = [], [], [], []
-    bar = _bar(len(q), "rendering", progress)
+    bar = progress_bar(len(q), "rendering", progress)
     for k in range(len(q)):
         pin.forwardKinematics(model, data, q[k])
         out = render_cloud(
