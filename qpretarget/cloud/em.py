@@ -162,6 +162,13 @@ class TooFewPoints(ConfigError):
 
 
 # ------------------------------------------------------------------------------ the fitter
+#: Largest horizontal speed [m/s] of a sole recorded as in contact in the run
+#: (:meth:`CloudRetargeter._moving_soles`): 2 cm a frame at 10 Hz, 7 mm at 30 Hz. A planted
+#: sole moves by the fit's slip alone (below 2 mm a frame on the shared clips); a walk's
+#: swing foot 5 m/s.
+STANCE_SPEED = 0.2
+
+
 class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
     """Fit the HUMROB template to a sequence of clouds; the joint angles drive the robot.
 
@@ -1175,6 +1182,34 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             bar.close()
         return self.trajectory(sequence, results), results
 
+    def _moving_soles(self, q: np.ndarray, t: np.ndarray, feet: list[str]) -> np.ndarray:
+        r"""(T, F) soles of the commanded robot moving faster than :data:`STANCE_SPEED`.
+
+        The sole's horizontal speed from frame :math:`k` to :math:`k+1` (the last frame: from
+        the one before), :math:`|p_{xy}(k+1) - p_{xy}(k)| / (t_{k+1} - t_k)`. The support the
+        fit works with is decided at each frame's start from the prediction's sole heights,
+        with a hysteresis (:class:`.stability.SupportTracker`: a foot is released only 7 cm
+        above the other), so a foot swung low, as in a walk, stayed "supporting" while it
+        travelled; the run's contacts (what ``evaluate``'s foot slip and support polygon and a
+        trainer's contact labels read) leave such a sole out.
+        """
+        T = len(q)
+        out = np.zeros((T, len(feet)), bool)
+        if T < 2 or not feet:
+            return out
+        model = self.robot.model
+        data = model.createData()
+        ids = [model.getFrameId(self.robot.feet[f].frame) for f in feet]
+        P = np.empty((T, len(feet), 2))
+        for k in range(T):
+            pin.framesForwardKinematics(model, data, q[k])
+            for i, fid in enumerate(ids):
+                P[k, i] = data.oMf[fid].translation[:2]
+        step = np.linalg.norm(np.diff(P, axis=0), axis=2)  # (T-1, F)
+        dt = np.maximum(np.diff(t), 1e-9)[:, None]
+        speed = np.concatenate([step / dt, (step / dt)[-1:]], axis=0)
+        return speed > STANCE_SPEED
+
     def trajectory(self, sequence: CloudSequence, results: list[FrameResult]) -> RobotTrajectory:
         """The run file content (``docs/formats.md``) of fitted frames."""
         robot = self.robot
@@ -1188,6 +1223,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         contacts = np.array([[f in r.support.feet for f in feet] for r in results], bool).reshape(
             len(results), len(feet)
         )
+        contacts &= ~self._moving_soles(q, t, feet)
         robot_spec = self.config.robot
         controller_yaml = yaml.safe_dump(
             {
