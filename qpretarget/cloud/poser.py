@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigError
+from ..motion.builtin import HUMAN_TO_Z_UP, HUMAN_URDF
 from ..motion.calibration import KEYPOINT_TREE as STANDARD_TREE
 
 #: Key-point tree used to re-proportion a clip to the human model: child -> parent. The standard
@@ -30,10 +31,8 @@ KEYPOINT_TREE: dict[str, str] = {
     if parent is not None and not child.endswith("_heel")
 }
 
-#: Rotation of the human_description model (y up, x forward, z right) into a z-up world.
-HUMAN_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-
-HUMAN_URDF = "example-robot-data:human_description/robots/human.urdf"
+# The human model's URDF and its axes' turn into the z-up world are motion.builtin's
+# (HUMAN_URDF, HUMAN_TO_Z_UP): the built-in motion poses the same model.
 
 
 def _worst(errors: np.ndarray) -> float:
