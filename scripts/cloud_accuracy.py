@@ -115,6 +115,7 @@ def _config(path: Path, sets: list[str], template_seed: int) -> dict[str, Any]:
 def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> dict[str, Any]:
     clip, frames, render_seed, template_seed, config, sets, cache, lead_in_speed = job
     import qpretarget as qp
+    from qpretarget.analysis.mesh_audit import audit_self_collision
     from qpretarget.cloud.config import CloudConfig
     from qpretarget.cloud.em import CloudRetargeter
     from qpretarget.cloud.io import read_cloud_sequence
@@ -129,6 +130,7 @@ def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> d
     times = np.array([r.time for r in results[1:]])  # the calibration frame not counted
     summary = arm_direction_summary(err, seq.t)
     summary.pop("per_segment_worst_deg")
+    audit = audit_self_collision(g1, traj.q)  # every link pair, on the meshes (evaluate's)
     return {
         "clip": clip,
         "render_seed": render_seed,
@@ -138,6 +140,8 @@ def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> d
         "ms_p95": 1000.0 * float(np.percentile(times, 95)),
         "reinitialised": sum(any(x.stage.startswith("reinit") for x in r.log) for r in results),
         "not_ok": sum(r.status != "ok" for r in results),
+        "penetrating_frames": audit.penetrating_frames,
+        "min_pair_distance_mm": audit.min_distance_mm,
     }
 
 
@@ -190,7 +194,8 @@ def main() -> None:
                 f"({row['worst_segment']}), median {row['median_deg']:.2f}, "
                 f"{row['frames_above_tolerance']} frames > 12, lost {row['longest_lost_s']:.2f} s, "
                 f"{row['ms_median']:.1f} / {row['ms_p95']:.0f} ms, "
-                f"{row['reinitialised']} re-initialised",
+                f"{row['reinitialised']} re-initialised, {row['penetrating_frames']} frames "
+                f"penetrating (min {row['min_pair_distance_mm']:.1f} mm)",
                 flush=True,
             )
     print(f"\n{len(rows)} runs in {time.perf_counter() - t0:.0f} s")
@@ -203,7 +208,9 @@ def main() -> None:
         print(
             f"{clip:8s} worst {' / '.join(f'{w:.1f}' for w in worst)} (mean {np.mean(worst):.1f}), "
             f"median {np.mean([r['median_deg'] for r in mine]):.2f}, lost {np.mean(lost):.2f} s "
-            f"mean ({sum(x <= 0.5 for x in lost)} of {len(lost)} within 0.5 s)"
+            f"mean ({sum(x <= 0.5 for x in lost)} of {len(lost)} within 0.5 s), penetrating "
+            f"frames {sum(r['penetrating_frames'] for r in mine)} (min "
+            f"{min(r['min_pair_distance_mm'] for r in mine):.1f} mm)"
         )
     within = [c for c in args.clips if all(r["worst_deg"] <= 12.0 for r in rows if r["clip"] == c)]
     print(f"mean of the worst {np.mean(means):.2f} deg; within 12 deg on every run: "

@@ -25,8 +25,11 @@ from typing import Any
 
 import yaml
 
+from ..constraints.self_collision import SelfCollision
 from ..errors import ConfigError, close_matches_hint
+from ..registry import build_from_spec
 from ..yamlio import read_yaml_file
+from .collisions import fit_spec
 
 
 @dataclass
@@ -402,6 +405,7 @@ TOP_KEYS = (
     "calibration",
     "em",
     "stability",
+    "self_collision",
 )
 
 _CHOICES = {
@@ -521,6 +525,25 @@ def _section(cls: type, spec: Any, path: str) -> Any:
     return cls(**values)
 
 
+def _self_collision(spec: Any) -> dict[str, Any] | None:
+    """The ``self_collision`` section: ``None`` (off) or the constraint's keys, checked."""
+    if spec is None or spec is False:
+        return None
+    if not isinstance(spec, Mapping):
+        raise ConfigError(
+            "must be a mapping of the self_collision constraint's keys (e.g. {pairs: auto, "
+            f"d_s: 0.01}}) or null (off), got {spec!r}.",
+            path="self_collision",
+        )
+    if "type" in spec:
+        raise ConfigError(
+            "the fit's self_collision section takes the constraint's keys only: remove `type`.",
+            path="self_collision.type",
+        )
+    build_from_spec(SelfCollision, fit_spec(spec), path="self_collision")
+    return dict(spec)
+
+
 @dataclass
 class CloudConfig:
     """The whole configuration of :class:`~qpretarget.cloud.em.CloudRetargeter`."""
@@ -534,6 +557,9 @@ class CloudConfig:
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
     em: EMConfig = field(default_factory=EMConfig)
     stability: StabilityConfig = field(default_factory=StabilityConfig)
+    #: The robot's links kept apart (:mod:`qpretarget.cloud.collisions`): the keys of the
+    #: controller's ``self_collision`` constraint, or ``None`` (off).
+    self_collision: dict[str, Any] | None = None
     text: str = ""
 
     @classmethod
@@ -561,6 +587,7 @@ class CloudConfig:
             calibration=_section(CalibrationConfig, spec.get("calibration"), "calibration"),
             em=_section(EMConfig, spec.get("em"), "em"),
             stability=_section(StabilityConfig, spec.get("stability"), "stability"),
+            self_collision=_self_collision(spec.get("self_collision")),
             text=text,
         )
         cfg._check()

@@ -92,6 +92,7 @@ from ..solvers import make_solver
 from ..trajectory import RobotTrajectory
 from .calibration import CalibrationMixin
 from .centres import CentresMixin
+from .collisions import CommandCollision
 from .compiled import overlap
 from .config import CloudConfig
 from .estep import EStep, _Neighbours, e_step, search_coordinates
@@ -137,6 +138,11 @@ class FrameResult:
             fewer than :data:`MIN_CLOUD_POINTS` cloud points, the person out of view; the
             last frame's pose kept).
         log: per-iteration log. time: wall time [s]. rule: what the hip-offset rule did.
+        clearance: the command's smallest link-pair distance above its safety distance [m]
+            (config ``self_collision``; NaN when off, inf when no pair is within d_i;
+            negative: a pair the steps could not clear, :mod:`.collisions`).
+        collision_steps: steps that moved the command off the fit's configuration to keep
+            its links apart (0: the fit's was clear).
     """
 
     q_fit: np.ndarray
@@ -150,6 +156,8 @@ class FrameResult:
     log: list[IterationLog] = field(default_factory=list)
     time: float = 0.0
     rule: str = ""
+    clearance: float = np.nan
+    collision_steps: int = 0
 
 
 #: Fewest cloud points (after cropping) a frame is fitted on; with fewer a tracking fit holds
@@ -211,6 +219,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         make_solver(cfg.solver, path="solver")  # validate now
         self._solver = make_solver(cfg.solver, path="solver")
         self._solver_restore = make_solver(cfg.solver, path="solver")
+        self._solver_clear = make_solver(cfg.solver, path="solver")  # the command's projection
         st = cfg.stability
         self.stability_mode = st.mode
         nv = self.robot.nv
@@ -226,6 +235,9 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             self._n_rows = self.rows.n_rows if st.mode == "qp" else 0
             if st.mode == "hip_offset":
                 self._hips = hip_joint_indices(self.robot, st.hip_joints)
+        self.collisions = (
+            None if cfg.self_collision is None else CommandCollision(self.robot, cfg.self_collision)
+        )
         self._qp = QPProblem(nv, self._n_rows)
         qi = self.robot.joint_q_index
         vi = self.robot.joint_v_index
@@ -367,6 +379,9 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         self._last: FrameResult | None = None  # the last frame fitted (what a held one keeps)
         if self.stability_mode != "none":
             self.tracker.reset()
+        if self.collisions is not None:
+            self.collisions.reset()
+            self._solver_clear.reset()
         self._solver.reset()
 
     def _fixed_scales(self) -> np.ndarray:
@@ -1029,6 +1044,15 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             if self.rows.margin_of(q, full=True) < 0:
                 q, _ = self._restore_balance(q)
         q_robot = self.robot_configuration(q, support)
+        clearance = np.nan
+        if self.collisions is not None:
+            # The fitted template has the person's proportions, the robot not: the command
+            # follows the fit's key points as far as its links stay apart (.collisions).
+            soles = [self.robot.frame_id(self.robot.feet[f].frame) for f in support.feet]
+            start = None if self._last is None else self._last.q_robot
+            q_robot, clearance = self.collisions.follow(
+                q_robot, start, soles, self.q_min, self.q_max, self._solver_clear
+            )
         if self.stability_mode != "none":
             self._update_anchors(q, support)
         margin = np.nan
@@ -1050,6 +1074,8 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             log,
             time.perf_counter() - t0,
             rule,
+            clearance,
+            0 if self.collisions is None else self.collisions.steps,
         )
         return self._last
 
@@ -1249,6 +1275,8 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             "cloud/iterations": np.array([r.iterations for r in results]),
             "cloud/com_margin": np.array([r.com_margin for r in results]),
             "cloud/backtracks": np.array([sum(x.backtracks for x in r.log) for r in results]),
+            "cloud/clearance": np.array([r.clearance for r in results]),
+            "cloud/collision_steps": np.array([r.collision_steps for r in results]),
         }
         human_q = sequence.meta.get("human_q")  # make-cloud's truth: evaluate scores the arms
         if human_q is not None and np.ndim(human_q) == 2 and len(human_q) >= len(results):

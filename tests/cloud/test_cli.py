@@ -98,8 +98,13 @@ def test_make_cloud_then_retarget_cloud(tmp_path, mocap, g1, capsys):
     assert human_q.shape[0] == len(seq)
     config = Path(__file__).resolve().parents[2] / "configs" / "cloud_g1.yaml"
     assert main(["retarget-cloud", str(config), str(clouds), "-o", str(run), "--no-progress"]) == 0
-    assert "0 frames not ok" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "0 frames not ok" in printed and "self-collision: " in printed
     traj = RobotTrajectory.load(run)
+    # Every frame's command clear of self-collision (the hulls' safety distance, up to the
+    # steps' tolerance), as the run file says.
+    assert traj.extra["cloud/clearance"].shape == (len(seq),)
+    assert np.all(traj.extra["cloud/clearance"] >= -2e-4)
     err = arm_direction_errors(g1, traj.q, HumanPoser(), human_q)
     assert err.max() <= 12.0, np.round(err.max(axis=0), 1)
     # The run carries the rendered person: evaluate scores its arms by the same measure
@@ -198,6 +203,12 @@ def test_accuracy_script_reproduces_the_measure(tmp_path, mocap, g1):
     err = arm_direction_errors(g1, traj.q, HumanPoser(), seq.meta["human_q"])
     assert run["worst_deg"] == pytest.approx(err.max(), abs=1e-9)
     assert run["worst_deg"] <= 12.0
+    # ... and its self-collision audit is evaluate's, on the same command.
+    from qpretarget.analysis.mesh_audit import audit_self_collision
+
+    audit = audit_self_collision(g1, traj.q)
+    assert run["penetrating_frames"] == audit.penetrating_frames == 0
+    assert run["min_pair_distance_mm"] == pytest.approx(audit.min_distance_mm, abs=1e-9)
     bad = subprocess.run([*cmd[:2], "--set", "em.reinit_ratio"], capture_output=True, text=True)
     assert bad.returncode != 0 and "KEY=VALUE" in bad.stderr
 

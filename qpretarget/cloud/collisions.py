@@ -1,0 +1,290 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""The robot's self-collision in the point-cloud command (config section ``self_collision``).
+
+Wang 2017 (HUMROB) keeps the fit within the joint limits (eq. 17) and the robot balanced
+(eq. 18-19), not its links apart: a person's hands pass close to their hips and thighs, and
+the robot's arm at the same angles goes into its own hips (CMU bend-and-scoop: 77 of 95
+frames, 42.7 mm deep on the meshes; 7 of 12 shared clips penetrated somewhere). The fitted
+template has the person's proportions, the robot does not: where the person's hand passes
+beside their thigh, the robot's may pass through its own. So the command, not the fit, is
+what is kept apart.
+
+**The pairs** are the controller's :class:`~qpretarget.constraints.SelfCollision` (the same
+pair rules, convex hulls, safety distances; docs/collisions.md) at the robot's joint angles
+(the base does not change a distance between links). For the closest pairs, distance
+:math:`d`, safety distance :math:`d_s`, gradient :math:`\nabla d`, a step :math:`\Delta` keeps
+the linearized distance at :math:`d_s`:
+
+.. math::
+    d + \nabla d^\top \Delta \;\ge\; d_s
+    \quad\Longleftrightarrow\quad
+    -\nabla d^\top \Delta \;\le\; \max(d - d_s,\ -r),
+
+the controller's velocity damper with one "tick" per step and a gain of one
+(``gain_per_tick: 1``: the whole gap may close), :math:`r` (``recovery_speed``, metres per
+step) the most a pair already too close is asked to part in one step.
+
+**The command's projection** (:meth:`FitCollision.project`, every frame). While a pair of the
+robot's configuration is closer than its safety distance, Gauss-Newton steps solve
+
+.. math::
+    \min_\Delta \sum_k \|J_k \Delta\|^2 + \epsilon\, \Delta^\top W \Delta
+    \quad\text{s.t. the rows above},\quad J_f \Delta = 0,\quad
+    \theta_{min} \le \theta + \Delta \le \theta_{max},
+
+:math:`J_k` the linear Jacobians of the robot's key points (``keyframes``: trunk, head,
+shoulders, elbows, wrists, hands, hips, knees, ankles), so that what the person is tracked
+by moves the least; :math:`J_f` the supporting soles' (held in place, six rows each);
+:math:`W` weighs each joint by the number of joints it moves and :math:`\epsilon` =
+:data:`KEY_POINT_REGULARIZATION` only settles what the key points leave free. A hand in the
+robot's hip moves out, or the hip moves aside, whichever moves the key points less.
+
+**In the fit** (``in_fit: true``, off by default): the same rows in every M-step, linearized
+once a frame and carried to each step (:meth:`FitCollision.rows`), so that the EM fits the
+template among poses that keep the robot's links apart. Measured (docs/point_clouds.md,
+*Seventeenth round*): the template cannot follow a person whose hands pass where the robot's
+hips are, and bend-and-scoop's arms were lost (worst frame 23-110 deg on 9 runs, was
+6.7-11.2).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from ..constraints.self_collision import SelfCollision
+from ..problem import QPProblem
+from ..registry import build_from_spec
+from ..robot import RobotModel, RobotState
+
+#: Defaults of the ``self_collision`` section where they differ from the controller's
+#: constraint: one step of :meth:`CommandCollision.follow` is one "tick" whose rows keep the
+#: linearized distance at d_s (gain 1), a pair already too close parts by at most 2 cm a step,
+#: and the step bound :data:`STEP_BOUND` replaces the trust region.
+FIT_DEFAULTS: dict[str, Any] = {
+    "d_s": 0.005,
+    "d_i": 0.06,
+    "gain_per_tick": 1.0,
+    "recovery_speed": 0.02,
+    "trust_region": None,
+}
+
+
+def fit_spec(spec: Mapping[str, Any]) -> dict[str, Any]:
+    """``spec`` with :data:`FIT_DEFAULTS` where not given (no default gain if one is given)."""
+    gains = ("xi", "gain", "gain_per_tick")
+    defaults = {
+        k: v for k, v in FIT_DEFAULTS.items() if not (k in gains and any(g in spec for g in gains))
+    }
+    return {**defaults, **dict(spec)}
+
+
+#: Body segments (parent, child key point) whose vectors the command keeps as the fit has
+#: them: the trunk, head, shoulders, arms, hands and legs (a segment's vector is its
+#: direction times its fixed length, so this keeps the directions the measures compare).
+SEGMENTS: tuple[tuple[str, str], ...] = (
+    ("pelvis", "torso"),
+    ("torso", "head"),
+    *(
+        (f"{s}_{a}", f"{s}_{b}") if a != "torso" and a != "pelvis" else (a, f"{s}_{b}")
+        for s in ("left", "right")
+        for a, b in (
+            ("torso", "shoulder"),
+            ("shoulder", "elbow"),
+            ("elbow", "wrist"),
+            ("wrist", "hand"),
+            ("pelvis", "hip"),
+            ("hip", "knee"),
+            ("knee", "ankle"),
+        )
+    ),
+)
+#: Weight of the joints' own distance to the fit's (times the number of joints each moves)
+#: against the key points' [m^2/rad^2]: 1 cm of a key point weighs like 0.1 rad of a limb's end
+#: joint (it settles what the key points leave free: a wrist's roll).
+KEY_POINT_REGULARIZATION = 1e-2
+#: Weight of a supporting sole's pose error against the key points' (its placement is held).
+SOLE_WEIGHT = 1e4
+#: Largest change of a coordinate in one step [rad, m]: the rows are first order.
+STEP_BOUND = 0.1
+#: Most Gauss-Newton steps of :meth:`CommandCollision.follow` per frame.
+FOLLOW_STEPS = 8
+#: Halvings of what a step asks of the pairs inside their safety distance when it cannot
+#: be met within the step bound (then: no deeper).
+PART_HALVINGS = 3
+#: A step smaller than this on every coordinate ends them [rad, m].
+FOLLOW_TOLERANCE = 1e-3
+#: A pair this far inside its safety distance [m] counts as clear (the rows' linearization
+#: error of a few tenths of a millimetre).
+CLEAR_TOLERANCE = 2e-4
+
+
+class CommandCollision:
+    r"""The robot command kept clear of itself (module docstring).
+
+    Args:
+        robot: the robot (its collision geometry and key points).
+        spec: the config's ``self_collision`` mapping: the keys of the controller's
+            ``self_collision`` constraint (``pairs``, ``d_s``, ``d_i``, ``include``,
+            ``safety``, ...), with :data:`FIT_DEFAULTS` where not given.
+
+    Raises:
+        ConfigError: an unknown key, a bad value or a link without collision geometry (with
+            the YAML path ``self_collision.<key>``).
+    """
+
+    def __init__(self, robot: RobotModel, spec: Mapping[str, Any]) -> None:
+        self.robot = robot
+        self.constraint = build_from_spec(SelfCollision, fit_spec(spec), path="self_collision")
+        self.constraint.bind(robot, path="self_collision")
+        # optional and the robot has no collision geometry: nothing to keep apart
+        self.n_rows = 0 if self.constraint.disabled else self.constraint.n_rows
+        self.state = RobotState(robot)
+        self._target = robot.model.createData()
+        #: The robot's body segments between its key points (:data:`SEGMENTS` of its
+        #: ``keyframes``), whose vectors follow the fit's: (parent frame, child frame).
+        kf = robot.keyframes
+        self._segments = [
+            (robot.frame_id(kf[a]), robot.frame_id(kf[b]))
+            for a, b in SEGMENTS
+            if a in kf and b in kf
+        ]
+        # 1 / length^2 [1/m^2]: a segment's vector error over its length is its turn [rad].
+        ref = robot.model.createData()
+        pin.framesForwardKinematics(robot.model, ref, robot.q_reference)
+        self._segment_weights = [
+            1.0
+            / max(float(np.linalg.norm(ref.oMf[b].translation - ref.oMf[a].translation)), 0.05) ** 2
+            for a, b in self._segments
+        ]
+        #: Weight of each velocity coordinate: the number of joints it moves (its subtree; a
+        #: limb's end 1, G1's waist 17), the base 1000.
+        m = robot.model
+        self._weights = np.ones(robot.nv)
+        for j in range(1, m.njoints):
+            jm = m.joints[j]
+            w = 1e3 if jm.shortname() == "JointModelFreeFlyer" else float(len(m.subtrees[j]))
+            self._weights[jm.idx_v : jm.idx_v + jm.nv] = w
+        self._C = np.zeros((self.n_rows, robot.nv))
+        self._lo = np.full(self.n_rows, -np.inf)
+        self._up = np.full(self.n_rows, np.inf)
+        #: Steps taken by the last :meth:`follow` (0: the fit's configuration was clear).
+        self.steps = 0
+
+    def reset(self) -> None:
+        """A new run: the pair model's state as built (a run repeats to the bit)."""
+        self.constraint.reset(self.state)
+
+    def linearize(self, q: np.ndarray) -> float:
+        r"""Linearize the closest pairs at ``q``; return their smallest :math:`d - d_s` [m].
+
+        Sets the rows ``lo <= C Delta <= up`` of a step from ``q`` (module docstring; unused
+        rows zero with infinite bounds) and the state's kinematics to ``q``'s; inf: no pair
+        within :math:`d_i`.
+        """
+        self.state.update(q)
+        if not self.n_rows:
+            return np.inf
+        block = self.constraint.compute_rows(self.state, 1.0)
+        np.copyto(self._C, block.C)
+        np.copyto(self._lo, block.l)
+        np.copyto(self._up, block.u)
+        gap = self.constraint._gap
+        return float(gap.min()) if gap.size else np.inf
+
+    def follow(
+        self,
+        q_target: np.ndarray,
+        q_start: np.ndarray | None,
+        soles: Sequence[int],
+        q_min: np.ndarray,
+        q_max: np.ndarray,
+        solver: Any,
+    ) -> tuple[np.ndarray, float]:
+        r"""The command nearest the fit's configuration ``q_target`` that keeps the links apart.
+
+        ``q_target`` itself when it is clear. Otherwise Gauss-Newton steps from ``q_start``
+        (the last frame's command, clear; ``None``: from ``q_target``) solve
+
+        .. math::
+            \min_\Delta \sum_k \|J_k \Delta - e_k\|^2
+            + w_s \sum_f \|J_f \Delta - e_f\|^2
+            + \epsilon\, (\Delta - \delta)^\top W (\Delta - \delta)
+
+        under the rows of :meth:`linearize`, the joint limits and :math:`|\Delta_j| \le`
+        :data:`STEP_BOUND`: :math:`e_k` the key points' errors to the target's, :math:`e_f`
+        the supporting soles' ``soles`` pose errors (weight :data:`SOLE_WEIGHT`),
+        :math:`\delta = q_{target} \ominus q`, :math:`\epsilon` =
+        :data:`KEY_POINT_REGULARIZATION`. A step whose rows cannot all be met within the
+        bound (a start deep inside several pairs) asks them to part by half as much, up to
+        :data:`PART_HALVINGS` times, then only to go no deeper.
+
+        Returns:
+            ``(q, gap)``: the command and its smallest :math:`d - d_s` [m] (negative: a pair
+            the steps could not clear).
+        """
+        self.steps = 0
+        gap = self.linearize(q_target)
+        if gap >= -CLEAR_TOLERANCE:
+            return q_target, gap
+        robot, model = self.robot, self.robot.model
+        nv, k = robot.nv, self.n_rows
+        data = self._target
+        pin.framesForwardKinematics(model, data, q_target)
+        seg_targets = [data.oMf[b].translation - data.oMf[a].translation for a, b in self._segments]
+        sole_targets = [data.oMf[f].copy() for f in soles]
+        q = q_target if q_start is None else q_start
+        if q_start is not None:
+            gap = self.linearize(q)
+        qp = QPProblem(nv, k)
+        qi, vi = robot.joint_q_index, robot.joint_v_index
+        reg = KEY_POINT_REGULARIZATION * self._weights
+        for _ in range(FOLLOW_STEPS):
+            delta = pin.difference(model, q, q_target)
+            H, g = np.diag(reg), -reg * delta
+            oMf = self.state.data.oMf
+            for (a, b), u, w in zip(
+                self._segments, seg_targets, self._segment_weights, strict=True
+            ):
+                J = self.state.frame_jacobian(b)[:3] - self.state.frame_jacobian(a)[:3]
+                H += w * J.T @ J
+                g -= w * J.T @ (u - (oMf[b].translation - oMf[a].translation))
+            for fid, M in zip(soles, sole_targets, strict=True):
+                J = self.state.frame_jacobian(fid)
+                cur = self.state.data.oMf[fid]
+                e = np.concatenate(
+                    [M.translation - cur.translation, pin.log3(M.rotation @ cur.rotation.T)]
+                )
+                H += SOLE_WEIGHT * J.T @ J
+                g -= SOLE_WEIGHT * J.T @ e
+            qp.H[...], qp.g[...] = H, g
+            qp.C[...], qp.l[...], qp.u[...] = self._C, self._lo, self._up
+            qp.lb[...], qp.ub[...] = -STEP_BOUND, STEP_BOUND
+            qp.lb[vi] = np.maximum(np.minimum(q_min[qi] - q[qi], 0.0), -STEP_BOUND)
+            qp.ub[vi] = np.minimum(np.maximum(q_max[qi] - q[qi], 0.0), STEP_BOUND)
+            sol = solver.solve(qp)
+            for _ in range(PART_HALVINGS + 1):
+                if sol.x is not None and np.all(np.isfinite(sol.x)):
+                    break
+                # The pairs too deep to part by recovery_speed at once within the step bound
+                # (several pressing on one link from both sides): ask half as much of them,
+                # at last only that they go no deeper.
+                inside = qp.u < 0.0
+                qp.u[inside] = 0.5 * qp.u[inside] if _ < PART_HALVINGS - 1 else 0.0
+                sol = solver.solve(qp)
+            if sol.x is None or not np.all(np.isfinite(sol.x)):
+                break
+            x = sol.x
+            q = pin.integrate(model, q, x)
+            q[qi] = np.clip(q[qi], q_min[qi], q_max[qi])
+            gap = self.linearize(q)
+            self.steps += 1
+            if np.max(np.abs(x)) < FOLLOW_TOLERANCE:
+                break
+        return q, gap
+
+
+__all__ = ["FIT_DEFAULTS", "CommandCollision", "fit_spec"]
