@@ -116,6 +116,7 @@ def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> d
     clip, frames, render_seed, template_seed, config, sets, cache, lead_in_speed = job
     import qpretarget as qp
     from qpretarget.analysis.mesh_audit import audit_self_collision
+    from qpretarget.analysis.metrics import compute_metrics
     from qpretarget.cloud.config import CloudConfig
     from qpretarget.cloud.em import CloudRetargeter
     from qpretarget.cloud.io import read_cloud_sequence
@@ -131,6 +132,7 @@ def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> d
     summary = arm_direction_summary(err, seq.t)
     summary.pop("per_segment_worst_deg")
     audit = audit_self_collision(g1, traj.q)  # every link pair, on the meshes (evaluate's)
+    support = compute_metrics(traj, per_frame=False)["support"]  # evaluate's CoM margin
     return {
         "clip": clip,
         "render_seed": render_seed,
@@ -142,6 +144,8 @@ def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> d
         "not_ok": sum(r.status != "ok" for r in results),
         "penetrating_frames": audit.penetrating_frames,
         "min_pair_distance_mm": audit.min_distance_mm,
+        "min_com_margin_mm": 1000.0 * (support["min_com_margin_m"] or np.nan),
+        "frames_com_outside": support["frames_com_outside"],
     }
 
 
@@ -195,7 +199,8 @@ def main() -> None:
                 f"{row['frames_above_tolerance']} frames > 12, lost {row['longest_lost_s']:.2f} s, "
                 f"{row['ms_median']:.1f} / {row['ms_p95']:.0f} ms, "
                 f"{row['reinitialised']} re-initialised, {row['penetrating_frames']} frames "
-                f"penetrating (min {row['min_pair_distance_mm']:.1f} mm)",
+                f"penetrating (min {row['min_pair_distance_mm']:.1f} mm), CoM margin "
+                f"{row['min_com_margin_mm']:.1f} mm ({row['frames_com_outside']} frames outside)",
                 flush=True,
             )
     print(f"\n{len(rows)} runs in {time.perf_counter() - t0:.0f} s")
@@ -210,7 +215,9 @@ def main() -> None:
             f"median {np.mean([r['median_deg'] for r in mine]):.2f}, lost {np.mean(lost):.2f} s "
             f"mean ({sum(x <= 0.5 for x in lost)} of {len(lost)} within 0.5 s), penetrating "
             f"frames {sum(r['penetrating_frames'] for r in mine)} (min "
-            f"{min(r['min_pair_distance_mm'] for r in mine):.1f} mm)"
+            f"{min(r['min_pair_distance_mm'] for r in mine):.1f} mm), CoM margin min "
+            f"{min(r['min_com_margin_mm'] for r in mine):.1f} mm, frames outside "
+            f"{sum(r['frames_com_outside'] for r in mine)}"
         )
     within = [c for c in args.clips if all(r["worst_deg"] <= 12.0 for r in rows if r["clip"] == c)]
     print(f"mean of the worst {np.mean(means):.2f} deg; within 12 deg on every run: "

@@ -29,7 +29,7 @@ from ..constraints.self_collision import SelfCollision
 from ..errors import ConfigError, close_matches_hint
 from ..registry import build_from_spec
 from ..yamlio import read_yaml_file
-from .collisions import fit_spec
+from .command import fit_spec
 
 
 @dataclass
@@ -557,7 +557,7 @@ class CloudConfig:
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
     em: EMConfig = field(default_factory=EMConfig)
     stability: StabilityConfig = field(default_factory=StabilityConfig)
-    #: The robot's links kept apart (:mod:`qpretarget.cloud.collisions`): the keys of the
+    #: The robot's links kept apart (:mod:`qpretarget.cloud.command`): the keys of the
     #: controller's ``self_collision`` constraint, or ``None`` (off).
     self_collision: dict[str, Any] | None = None
     text: str = ""

@@ -92,7 +92,7 @@ from ..solvers import make_solver
 from ..trajectory import RobotTrajectory
 from .calibration import CalibrationMixin
 from .centres import CentresMixin
-from .collisions import CommandCollision
+from .command import CommandProjection
 from .compiled import overlap
 from .config import CloudConfig
 from .estep import EStep, _Neighbours, e_step, search_coordinates
@@ -140,9 +140,9 @@ class FrameResult:
         log: per-iteration log. time: wall time [s]. rule: what the hip-offset rule did.
         clearance: the command's smallest link-pair distance above its safety distance [m]
             (config ``self_collision``; NaN when off, inf when no pair is within d_i;
-            negative: a pair the steps could not clear, :mod:`.collisions`).
-        collision_steps: steps that moved the command off the fit's configuration to keep
-            its links apart (0: the fit's was clear).
+            negative: a pair the steps could not clear, :mod:`.command`).
+        command_steps: steps that moved the command off the fit's configuration to keep its
+            links apart (:meth:`CloudRetargeter._command`; 0: the fit's was clear).
     """
 
     q_fit: np.ndarray
@@ -157,7 +157,7 @@ class FrameResult:
     time: float = 0.0
     rule: str = ""
     clearance: float = np.nan
-    collision_steps: int = 0
+    command_steps: int = 0
 
 
 #: Fewest cloud points (after cropping) a frame is fitted on; with fewer a tracking fit holds
@@ -235,8 +235,13 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             self._n_rows = self.rows.n_rows if st.mode == "qp" else 0
             if st.mode == "hip_offset":
                 self._hips = hip_joint_indices(self.robot, st.hip_joints)
-        self.collisions = (
-            None if cfg.self_collision is None else CommandCollision(self.robot, cfg.self_collision)
+        #: The command with the robot's links apart (:mod:`.command`, ``self_collision``),
+        #: its CoM kept over its soles while they are moved apart (``stability.mode: qp``).
+        self.command = CommandProjection(self.robot, cfg.self_collision)
+        self._command_rows = (
+            StabilityRows(self.robot, margin=st.margin, region=st.region)
+            if st.mode == "qp" and cfg.self_collision is not None
+            else None
         )
         self._qp = QPProblem(nv, self._n_rows)
         qi = self.robot.joint_q_index
@@ -379,9 +384,8 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         self._last: FrameResult | None = None  # the last frame fitted (what a held one keeps)
         if self.stability_mode != "none":
             self.tracker.reset()
-        if self.collisions is not None:
-            self.collisions.reset()
-            self._solver_clear.reset()
+        self.command.reset()
+        self._solver_clear.reset()
         self._solver.reset()
 
     def _fixed_scales(self) -> np.ndarray:
@@ -1044,15 +1048,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             if self.rows.margin_of(q, full=True) < 0:
                 q, _ = self._restore_balance(q)
         q_robot = self.robot_configuration(q, support)
-        clearance = np.nan
-        if self.collisions is not None:
-            # The fitted template has the person's proportions, the robot not: the command
-            # follows the fit's key points as far as its links stay apart (.collisions).
-            soles = [self.robot.frame_id(self.robot.feet[f].frame) for f in support.feet]
-            start = None if self._last is None else self._last.q_robot
-            q_robot, clearance = self.collisions.follow(
-                q_robot, start, soles, self.q_min, self.q_max, self._solver_clear
-            )
+        q_robot, clearance = self._command(q_robot, support)
         if self.stability_mode != "none":
             self._update_anchors(q, support)
         margin = np.nan
@@ -1075,9 +1071,36 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             time.perf_counter() - t0,
             rule,
             clearance,
-            0 if self.collisions is None else self.collisions.steps,
+            self.command.steps,
         )
         return self._last
+
+    def _command(self, q_robot: np.ndarray, support: Support) -> tuple[np.ndarray, float]:
+        """The command with the robot's links apart (:meth:`.command.CommandProjection.follow`).
+
+        The fit's own configuration when its links are apart (or ``self_collision`` is off);
+        its supporting soles stay where the placement put them and, with ``stability.mode:
+        qp``, its CoM over their polygon. Returns ``(q_robot, clearance [m])``.
+        """
+        if self.command.constraint is None:
+            return q_robot, np.nan
+        data = self.robot.model.createData()
+        pin.framesForwardKinematics(self.robot.model, data, q_robot)
+        soles = [
+            (fid, data.oMf[fid].copy())
+            for fid in (self.placement.sole_frame(f) for f in support.feet)
+        ]
+        balance = None
+        if self._command_rows is not None and support.feet:
+            # Kept over the soles where the fit's command stands balanced; a walk's CoM,
+            # outside its support between steps, is left as the fit has it.
+            self._command_rows.set_support(support, q_robot)
+            if self._command_rows.margin_of(q_robot, full=True) >= 0.0:
+                balance = self._command_rows
+        start = None if self._last is None else self._last.q_robot
+        return self.command.follow(
+            q_robot, start, soles, self.q_min, self.q_max, self._solver_clear, balance
+        )
 
     def _stages(
         self,
@@ -1276,7 +1299,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             "cloud/com_margin": np.array([r.com_margin for r in results]),
             "cloud/backtracks": np.array([sum(x.backtracks for x in r.log) for r in results]),
             "cloud/clearance": np.array([r.clearance for r in results]),
-            "cloud/collision_steps": np.array([r.collision_steps for r in results]),
+            "cloud/command_steps": np.array([r.command_steps for r in results]),
         }
         human_q = sequence.meta.get("human_q")  # make-cloud's truth: evaluate scores the arms
         if human_q is not None and np.ndim(human_q) == 2 and len(human_q) >= len(results):

@@ -142,6 +142,10 @@ class SolePlacement:
             q[iq] += np.linalg.lstsq(J, e, rcond=None)[0]
         return self._plant_bounded(q_fit, position, fid, iq, iv, target)
 
+    def sole_frame(self, foot: str) -> int:
+        """The robot's sole frame of ``foot``."""
+        return self.robot.frame_id(self.robot.feet[foot].frame)
+
     def _leg(self, foot: str) -> tuple[int, np.ndarray, np.ndarray]:
         """The sole frame of ``foot`` and its leg's one-DoF joints, computed once per foot.
 

@@ -101,13 +101,15 @@ def run(args: argparse.Namespace) -> int:
         + f"; {np.median(times) * 1000:.0f} ms/frame median; "
         + f"{int(np.sum(status != 'ok'))} frames not ok"
     )
-    if fitter.collisions is not None:
-        moved = sum(r.collision_steps > 0 for r in results)
+    if fitter.command.constraint is not None:
+        moved = sum(r.command_steps > 0 for r in results)
         clear = min(r.clearance for r in results)
         print(
             f"self-collision: {moved} frames moved off the fit to keep the robot's links apart; "
-            f"smallest clearance {1000 * clear:+.1f} mm over the safety distance"
-            if np.isfinite(clear)
-            else f"self-collision: {moved} frames moved off the fit; no pair came within d_i"
+            + (
+                f"smallest clearance {1000 * clear:+.1f} mm over the safety distance"
+                if np.isfinite(clear)
+                else "no pair came within the influence distance"
+            )
         )
     return 0

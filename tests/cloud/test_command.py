@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The point-cloud fit's self-collision (qpretarget.cloud.collisions, config ``self_collision``)."""
+"""The point-cloud fit's self-collision (qpretarget.cloud.command, config ``self_collision``)."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ import pytest
 import yaml
 
 from qpretarget.analysis.mesh_audit import audit_self_collision
-from qpretarget.cloud.collisions import (
+from qpretarget.cloud.command import (
     CLEAR_TOLERANCE,
     FOLLOW_STEPS,
     SEGMENTS,
-    CommandCollision,
+    CommandProjection,
 )
 from qpretarget.cloud.config import CloudConfig
 from qpretarget.errors import ConfigError
@@ -60,11 +60,14 @@ def _sole_errors(g1, q0: np.ndarray, q1: np.ndarray, soles: list[int]) -> list[n
 
 
 def test_a_penetrating_command_is_cleared_turning_the_segments_the_least(g1, shipped_spec):
-    cc = CommandCollision(g1, shipped_spec)
+    cc = CommandProjection(g1, shipped_spec)
     target = _arm_in_the_hip(g1)
     assert audit_self_collision(g1, target[None]).penetrating_frames == 1
     soles = [g1.frame_id(f.frame) for f in g1.feet.values()]
-    q, gap = cc.follow(target, None, soles, g1.q_min, g1.q_max, make_solver({"name": "daqp"}))
+    data = g1.model.createData()
+    pin.framesForwardKinematics(g1.model, data, target)
+    placed = [(f, data.oMf[f].copy()) for f in soles]
+    q, gap = cc.follow(target, None, placed, g1.q_min, g1.q_max, make_solver({"name": "daqp"}))
     # Every pair at its safety distance on the hulls (conservative: the meshes lie inside)
     # up to the tolerance: d_s = 5 mm, or a quarter of the pair's distance at rest for pairs
     # that sit close by construction.
@@ -91,7 +94,7 @@ def test_a_penetrating_command_is_cleared_turning_the_segments_the_least(g1, shi
 def test_a_clear_start_never_enters_and_stops_at_the_contact(g1, shipped_spec):
     """From the last frame's clear command, the steps follow the fit's penetrating pose up to
     the safety distance (the controller's damper: the hulls are never entered)."""
-    cc = CommandCollision(g1, shipped_spec)
+    cc = CommandProjection(g1, shipped_spec)
     start, target = g1.q_reference.copy(), _arm_in_the_hip(g1)
     assert cc.linearize(start) >= 0.0
     q, gap = cc.follow(target, start, [], g1.q_min, g1.q_max, make_solver({"name": "daqp"}))
@@ -105,7 +108,7 @@ def test_a_clear_start_never_enters_and_stops_at_the_contact(g1, shipped_spec):
 
 
 def test_a_clear_command_is_left_as_the_fit_has_it(g1, shipped_spec):
-    cc = CommandCollision(g1, shipped_spec)
+    cc = CommandProjection(g1, shipped_spec)
     q0 = g1.q_reference.copy()
     q, gap = cc.follow(q0, None, [], g1.q_min, g1.q_max, make_solver({"name": "daqp"}))
     assert q is q0 and cc.steps == 0 and gap >= 0.0

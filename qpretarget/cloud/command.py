@@ -1,13 +1,13 @@
 # SPDX-License-Identifier: Apache-2.0
-r"""The robot's self-collision in the point-cloud command (config section ``self_collision``).
+r"""The point-cloud command with the robot's links apart (config section ``self_collision``).
 
-Wang 2017 (HUMROB) keeps the fit within the joint limits (eq. 17) and the robot balanced
-(eq. 18-19), not its links apart: a person's hands pass close to their hips and thighs, and
-the robot's arm at the same angles goes into its own hips (CMU bend-and-scoop: 77 of 95
-frames, 42.7 mm deep on the meshes; 7 of 12 shared clips penetrated somewhere). The fitted
-template has the person's proportions, the robot does not: where the person's hand passes
-beside their thigh, the robot's may pass through its own. So the command, not the fit, is
-what is kept apart.
+The fit (:mod:`.em`) places a template with the person's proportions; the command is G1 at the
+fitted joint angles, its primary sole planted (:mod:`.placement`). Wang 2017 (HUMROB) keeps the
+joint limits (eq. 17) and the balance (eq. 18-19), not link distances: where a person's hand
+passes beside their hip, G1's (other proportions) goes through its own. Before stop 48
+``evaluate``'s mesh audit found bend-and-scoop's command penetrating on 77 of 95 frames, a
+wrist 42.7 mm into a hip, and 7 of 12 shared clips penetrating somewhere. So the command, not
+the fit, is kept apart.
 
 **The pairs** are the controller's :class:`~qpretarget.constraints.SelfCollision` (the same
 pair rules, convex hulls, safety distances; docs/collisions.md) at the robot's joint angles
@@ -24,33 +24,27 @@ the controller's velocity damper with one "tick" per step and a gain of one
 (``gain_per_tick: 1``: the whole gap may close), :math:`r` (``recovery_speed``, metres per
 step) the most a pair already too close is asked to part in one step.
 
-**The command's projection** (:meth:`FitCollision.project`, every frame). While a pair of the
-robot's configuration is closer than its safety distance, Gauss-Newton steps solve
+**The projection** (:meth:`CommandProjection.follow`, every frame). The fit's configuration
+is the command when its links are apart. Otherwise Gauss-Newton steps move it the least, in
+the sense of the body's segments (pelvis-torso, torso-head, the shoulders, upper arms,
+forearms, hands, hips, thighs, shanks, from the robot's ``keyframes``): their vectors follow
+the fit's, each weighed by 1/length² so that the objective is in squared angle (the
+arm-direction measure's terms), the supporting soles held (weight :data:`SOLE_WEIGHT`),
+under the rows above, the balance rows of :mod:`.stability` (the CoM kept over the soles'
+polygon, or no further out), the joint limits and :data:`STEP_BOUND` a step. The steps start from
+the last frame's command, which is clear, so that, like the controller's damper, they never
+enter a pair: a hand slides along the hip instead of going through it.
 
-.. math::
-    \min_\Delta \sum_k \|J_k \Delta\|^2 + \epsilon\, \Delta^\top W \Delta
-    \quad\text{s.t. the rows above},\quad J_f \Delta = 0,\quad
-    \theta_{min} \le \theta + \Delta \le \theta_{max},
-
-:math:`J_k` the linear Jacobians of the robot's key points (``keyframes``: trunk, head,
-shoulders, elbows, wrists, hands, hips, knees, ankles), so that what the person is tracked
-by moves the least; :math:`J_f` the supporting soles' (held in place, six rows each);
-:math:`W` weighs each joint by the number of joints it moves and :math:`\epsilon` =
-:data:`KEY_POINT_REGULARIZATION` only settles what the key points leave free. A hand in the
-robot's hip moves out, or the hip moves aside, whichever moves the key points less.
-
-**In the fit** (``in_fit: true``, off by default): the same rows in every M-step, linearized
-once a frame and carried to each step (:meth:`FitCollision.rows`), so that the EM fits the
-template among poses that keep the robot's links apart. Measured (docs/point_clouds.md,
-*Seventeenth round*): the template cannot follow a person whose hands pass where the robot's
-hips are, and bend-and-scoop's arms were lost (worst frame 23-110 deg on 9 runs, was
-6.7-11.2).
+**Not in the fit.** The same rows in every M-step (the template itself kept apart) were
+measured (docs/point_clouds.md, *Seventeenth round*): the template cannot follow a person
+whose hands pass where G1's hips are, and bend-and-scoop's arms were lost (worst frame
+23-110 deg on 9 runs, was 6.7-11.2).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -61,7 +55,7 @@ from ..registry import build_from_spec
 from ..robot import RobotModel, RobotState
 
 #: Defaults of the ``self_collision`` section where they differ from the controller's
-#: constraint: one step of :meth:`CommandCollision.follow` is one "tick" whose rows keep the
+#: constraint: one step of :meth:`CommandProjection.follow` is one "tick" whose rows keep the
 #: linearized distance at d_s (gain 1), a pair already too close parts by at most 2 cm a step,
 #: and the step bound :data:`STEP_BOUND` replaces the trust region.
 FIT_DEFAULTS: dict[str, Any] = {
@@ -110,7 +104,12 @@ KEY_POINT_REGULARIZATION = 1e-2
 SOLE_WEIGHT = 1e4
 #: Largest change of a coordinate in one step [rad, m]: the rows are first order.
 STEP_BOUND = 0.1
-#: Most Gauss-Newton steps of :meth:`CommandCollision.follow` per frame.
+#: Farthest a joint of the fit's configuration may have jumped since the last frame's [rad]
+#: for the steps to start from the last command: a fit that jumped further (a walk's knee
+#: flipping between two fits, 1 rad) is not followed from where the command was (the steps
+#: move a joint by at most STEP_BOUND, FOLLOW_STEPS times) but pushed out from where it is.
+FOLLOW_REACH = 0.4
+#: Most Gauss-Newton steps of :meth:`CommandProjection.follow` per frame.
 FOLLOW_STEPS = 8
 #: Halvings of what a step asks of the pairs inside their safety distance when it cannot
 #: be met within the step bound (then: no deeper).
@@ -122,26 +121,30 @@ FOLLOW_TOLERANCE = 1e-3
 CLEAR_TOLERANCE = 2e-4
 
 
-class CommandCollision:
-    r"""The robot command kept clear of itself (module docstring).
+class CommandProjection:
+    r"""The robot command with its links apart (module docstring).
 
     Args:
         robot: the robot (its collision geometry and key points).
         spec: the config's ``self_collision`` mapping: the keys of the controller's
             ``self_collision`` constraint (``pairs``, ``d_s``, ``d_i``, ``include``,
-            ``safety``, ...), with :data:`FIT_DEFAULTS` where not given.
+            ``safety``, ...), with :data:`FIT_DEFAULTS` where not given; ``None``: the
+            links are not checked (:meth:`follow` returns the fit's configuration).
 
     Raises:
         ConfigError: an unknown key, a bad value or a link without collision geometry (with
             the YAML path ``self_collision.<key>``).
     """
 
-    def __init__(self, robot: RobotModel, spec: Mapping[str, Any]) -> None:
+    def __init__(self, robot: RobotModel, spec: Mapping[str, Any] | None) -> None:
         self.robot = robot
-        self.constraint = build_from_spec(SelfCollision, fit_spec(spec), path="self_collision")
-        self.constraint.bind(robot, path="self_collision")
-        # optional and the robot has no collision geometry: nothing to keep apart
-        self.n_rows = 0 if self.constraint.disabled else self.constraint.n_rows
+        self.constraint: SelfCollision | None = None
+        self.n_rows = 0
+        if spec is not None:
+            self.constraint = build_from_spec(SelfCollision, fit_spec(spec), path="self_collision")
+            self.constraint.bind(robot, path="self_collision")
+            # optional and the robot has no collision geometry: nothing to keep apart
+            self.n_rows = 0 if self.constraint.disabled else self.constraint.n_rows
         self.state = RobotState(robot)
         self._target = robot.model.createData()
         #: The robot's body segments between its key points (:data:`SEGMENTS` of its
@@ -173,10 +176,13 @@ class CommandCollision:
         self._up = np.full(self.n_rows, np.inf)
         #: Steps taken by the last :meth:`follow` (0: the fit's configuration was clear).
         self.steps = 0
+        self._previous_target: np.ndarray | None = None
 
     def reset(self) -> None:
         """A new run: the pair model's state as built (a run repeats to the bit)."""
-        self.constraint.reset(self.state)
+        if self.constraint is not None:
+            self.constraint.reset(self.state)
+        self._previous_target = None
 
     def linearize(self, q: np.ndarray) -> float:
         r"""Linearize the closest pairs at ``q``; return their smallest :math:`d - d_s` [m].
@@ -186,7 +192,7 @@ class CommandCollision:
         within :math:`d_i`.
         """
         self.state.update(q)
-        if not self.n_rows:
+        if not self.n_rows or self.constraint is None:
             return np.inf
         block = self.constraint.compute_rows(self.state, 1.0)
         np.copyto(self._C, block.C)
@@ -195,51 +201,73 @@ class CommandCollision:
         gap = self.constraint._gap
         return float(gap.min()) if gap.size else np.inf
 
+    def _sole_error(self, fid: int, target: pin.SE3) -> np.ndarray:
+        """[translation; rotation] error (6,) of sole frame ``fid`` to ``target``.
+
+        At the state's configuration, in the world's axes (the LOCAL_WORLD_ALIGNED Jacobian's).
+        """
+        cur = self.state.data.oMf[fid]
+        return np.concatenate(
+            [target.translation - cur.translation, pin.log3(target.rotation @ cur.rotation.T)]
+        )
+
     def follow(
         self,
         q_target: np.ndarray,
         q_start: np.ndarray | None,
-        soles: Sequence[int],
+        soles: Sequence[tuple[int, pin.SE3]],
         q_min: np.ndarray,
         q_max: np.ndarray,
         solver: Any,
+        balance: BalanceRows | None = None,
     ) -> tuple[np.ndarray, float]:
-        r"""The command nearest the fit's configuration ``q_target`` that keeps the links apart.
+        r"""The command nearest the fit's configuration ``q_target`` with its links apart.
 
-        ``q_target`` itself when it is clear. Otherwise Gauss-Newton steps from ``q_start``
-        (the last frame's command, clear; ``None``: from ``q_target``) solve
+        ``q_target`` itself when they are. Otherwise Gauss-Newton steps from ``q_start`` (the
+        last frame's command, clear: the steps never enter a pair; from ``q_target`` when it
+        is ``None`` or a joint of the fit jumped more than :data:`FOLLOW_REACH` since the
+        last call) solve
 
         .. math::
-            \min_\Delta \sum_k \|J_k \Delta - e_k\|^2
-            + w_s \sum_f \|J_f \Delta - e_f\|^2
+            \min_\Delta \sum_s w_s \|(J_{b_s} - J_{a_s}) \Delta - e_s\|^2
+            + w_f \sum_f \|J_f \Delta - e_f\|^2
             + \epsilon\, (\Delta - \delta)^\top W (\Delta - \delta)
 
-        under the rows of :meth:`linearize`, the joint limits and :math:`|\Delta_j| \le`
-        :data:`STEP_BOUND`: :math:`e_k` the key points' errors to the target's, :math:`e_f`
-        the supporting soles' ``soles`` pose errors (weight :data:`SOLE_WEIGHT`),
+        under the rows of :meth:`linearize`, ``balance``'s rows (the CoM over the supporting
+        soles' polygon, :meth:`.stability.StabilityRows.rows`, Wang 2017 eq. 18-19, each
+        bound at least 0: moving the links apart must not tip the robot, nor move a CoM that
+        is outside, as in a walk, further out), the joint limits and
+        :math:`|\Delta_j| \le` :data:`STEP_BOUND`: :math:`e_s` the segments' vector errors
+        to the target's (weights
+        :math:`w_s` = 1/length², module docstring), :math:`e_f` the supporting soles'
+        (``soles``: frame id, placement) pose errors (:math:`w_f` = :data:`SOLE_WEIGHT`),
         :math:`\delta = q_{target} \ominus q`, :math:`\epsilon` =
         :data:`KEY_POINT_REGULARIZATION`. A step whose rows cannot all be met within the
-        bound (a start deep inside several pairs) asks them to part by half as much, up to
-        :data:`PART_HALVINGS` times, then only to go no deeper.
+        bound (a start deep inside several pairs) asks half as much of the pairs it violates,
+        up to :data:`PART_HALVINGS` times, then only that they get no deeper.
 
         Returns:
             ``(q, gap)``: the command and its smallest :math:`d - d_s` [m] (negative: a pair
             the steps could not clear).
         """
         self.steps = 0
+        previous, self._previous_target = self._previous_target, q_target
         gap = self.linearize(q_target)
         if gap >= -CLEAR_TOLERANCE:
             return q_target, gap
         robot, model = self.robot, self.robot.model
         nv, k = robot.nv, self.n_rows
+        nb = 0 if balance is None else balance.n_rows
         data = self._target
         pin.framesForwardKinematics(model, data, q_target)
         seg_targets = [data.oMf[b].translation - data.oMf[a].translation for a, b in self._segments]
-        sole_targets = [data.oMf[f].copy() for f in soles]
-        q = q_target if q_start is None else q_start
-        if q_start is not None:
-            gap = self.linearize(q)
-        qp = QPProblem(nv, k)
+        q = q_target
+        if q_start is not None and previous is not None:
+            jump = np.abs(pin.difference(model, previous, q_target)[robot.joint_v_index])
+            if float(jump.max(initial=0.0)) <= FOLLOW_REACH:
+                q = q_start
+                gap = self.linearize(q)
+        qp = QPProblem(nv, k + nb)
         qi, vi = robot.joint_q_index, robot.joint_v_index
         reg = KEY_POINT_REGULARIZATION * self._weights
         for _ in range(FOLLOW_STEPS):
@@ -252,16 +280,17 @@ class CommandCollision:
                 J = self.state.frame_jacobian(b)[:3] - self.state.frame_jacobian(a)[:3]
                 H += w * J.T @ J
                 g -= w * J.T @ (u - (oMf[b].translation - oMf[a].translation))
-            for fid, M in zip(soles, sole_targets, strict=True):
+            for fid, M in soles:
                 J = self.state.frame_jacobian(fid)
-                cur = self.state.data.oMf[fid]
-                e = np.concatenate(
-                    [M.translation - cur.translation, pin.log3(M.rotation @ cur.rotation.T)]
-                )
                 H += SOLE_WEIGHT * J.T @ J
-                g -= SOLE_WEIGHT * J.T @ e
+                g -= SOLE_WEIGHT * J.T @ self._sole_error(fid, M)
             qp.H[...], qp.g[...] = H, g
-            qp.C[...], qp.l[...], qp.u[...] = self._C, self._lo, self._up
+            qp.C[:k], qp.l[:k], qp.u[:k] = self._C, self._lo, self._up
+            if balance is not None:
+                qp.C[k:], qp.l[k:], qp.u[k:] = balance.rows(q)
+                # No further out than the fit's command has it (a walk's CoM leaves the
+                # support: moving the links apart must not tip it, nor pull it back in).
+                np.maximum(qp.u[k:], 0.0, out=qp.u[k:])
             qp.lb[...], qp.ub[...] = -STEP_BOUND, STEP_BOUND
             qp.lb[vi] = np.maximum(np.minimum(q_min[qi] - q[qi], 0.0), -STEP_BOUND)
             qp.ub[vi] = np.minimum(np.maximum(q_max[qi] - q[qi], 0.0), STEP_BOUND)
@@ -269,8 +298,8 @@ class CommandCollision:
             for _ in range(PART_HALVINGS + 1):
                 if sol.x is not None and np.all(np.isfinite(sol.x)):
                     break
-                # The pairs too deep to part by recovery_speed at once within the step bound
-                # (several pressing on one link from both sides): ask half as much of them,
+                # Pairs too deep to part by recovery_speed at once within the step bound (a
+                # link pressed into two others from both sides): ask half as much of them,
                 # at last only that they go no deeper.
                 inside = qp.u < 0.0
                 qp.u[inside] = 0.5 * qp.u[inside] if _ < PART_HALVINGS - 1 else 0.0
@@ -287,4 +316,15 @@ class CommandCollision:
         return q, gap
 
 
-__all__ = ["FIT_DEFAULTS", "CommandCollision", "fit_spec"]
+class BalanceRows(Protocol):
+    """The balance :meth:`CommandProjection.follow` keeps.
+
+    :class:`.stability.StabilityRows`, its support set at the command.
+    """
+
+    n_rows: int
+
+    def rows(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+__all__ = ["FIT_DEFAULTS", "BalanceRows", "CommandProjection", "fit_spec"]
