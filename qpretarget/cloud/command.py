@@ -225,8 +225,9 @@ class CommandProjection:
 
         ``q_target`` itself when they are. Otherwise Gauss-Newton steps from ``q_start`` (the
         last frame's command, clear: the steps never enter a pair; from ``q_target`` when it
-        is ``None`` or a joint of the fit jumped more than :data:`FOLLOW_REACH` since the
-        last call) solve
+        is ``None``; first from ``q_target`` and then, if that cannot clear every pair, from
+        ``q_start`` when a joint of the fit jumped more than :data:`FOLLOW_REACH` since the
+        last call; the clearest result kept) solve
 
         .. math::
             \min_\Delta \sum_s w_s \|(J_{b_s} - J_{a_s}) \Delta - e_s\|^2
@@ -261,15 +262,40 @@ class CommandProjection:
         data = self._target
         pin.framesForwardKinematics(model, data, q_target)
         seg_targets = [data.oMf[b].translation - data.oMf[a].translation for a, b in self._segments]
-        q = q_target
+        starts = [q_target] if q_start is None else [q_start]
         if q_start is not None and previous is not None:
             jump = np.abs(pin.difference(model, previous, q_target)[robot.joint_v_index])
-            if float(jump.max(initial=0.0)) <= FOLLOW_REACH:
-                q = q_start
-                gap = self.linearize(q)
+            if float(jump.max(initial=0.0)) > FOLLOW_REACH:
+                starts.insert(0, q_target)  # then, if that cannot clear, from the command
         qp = QPProblem(nv, k + nb)
+        best: tuple[np.ndarray, float] | None = None
+        for q in starts:
+            q, gap = self._steps(q, q_target, seg_targets, soles, q_min, q_max, solver, balance, qp)
+            if best is None or gap > best[1]:
+                best = (q, gap)
+            if gap >= -CLEAR_TOLERANCE:
+                break
+        assert best is not None
+        return best
+
+    def _steps(
+        self,
+        q: np.ndarray,
+        q_target: np.ndarray,
+        seg_targets: list[np.ndarray],
+        soles: Sequence[tuple[int, pin.SE3]],
+        q_min: np.ndarray,
+        q_max: np.ndarray,
+        solver: Any,
+        balance: BalanceRows | None,
+        qp: QPProblem,
+    ) -> tuple[np.ndarray, float]:
+        """The Gauss-Newton steps of :meth:`follow` from ``q``; return ``(q, gap)``."""
+        robot, model = self.robot, self.robot.model
+        k = self.n_rows
         qi, vi = robot.joint_q_index, robot.joint_v_index
         reg = KEY_POINT_REGULARIZATION * self._weights
+        gap = self.linearize(q)
         for _ in range(FOLLOW_STEPS):
             delta = pin.difference(model, q, q_target)
             H, g = np.diag(reg), -reg * delta
