@@ -127,3 +127,33 @@ def test_bad_self_collision_sections_name_the_key():
     cfg = CloudConfig.from_dict({"self_collision": {"gain": 2.0}})
     assert cfg.self_collision == {"gain": 2.0}
     assert CloudConfig.from_dict({}).self_collision is None
+
+
+def test_moving_the_links_apart_does_not_tip_the_robot(g1, shipped_spec):
+    """With balance rows the projection moves the CoM no further out of the support polygon.
+
+    G1 on its right sole alone with its left arm in its hip: the CoM already lies outside that
+    sole (between the feet), and swinging the left arm out moves it further left, away from
+    the sole (measured without the rows: 9.6 mm further out). With the rows (each bound at
+    least 0) it ends no further out than it started, 0.1 mm allowed for the linearization.
+    """
+    from qpretarget.cloud.stability import StabilityRows, Support
+
+    target = _arm_in_the_hip(g1)
+    right = g1.frame_id(g1.feet["right_foot"].frame)
+    data = g1.model.createData()
+    pin.framesForwardKinematics(g1.model, data, target)
+    soles = [(right, data.oMf[right].copy())]
+    support = Support(feet=["right_foot"], primary="right_foot")
+    margins = {}
+    for with_rows in (False, True):
+        rows = StabilityRows(g1, margin=0.01, region="polygon")
+        rows.set_support(support, target)
+        before = rows.margin_of(target, full=True)
+        cc = CommandProjection(g1, shipped_spec)
+        q, gap = cc.follow(target, None, soles, g1.q_min, g1.q_max,
+                           make_solver({"name": "daqp"}), rows if with_rows else None)  # fmt: skip
+        assert gap >= -CLEAR_TOLERANCE
+        margins[with_rows] = rows.margin_of(q, full=True) - before
+    assert margins[False] < -5e-3, margins  # the arm swung out tips the robot further ...
+    assert margins[True] >= -1e-4, margins  # ... which the rows do not let it do
