@@ -10,7 +10,9 @@ settings over several seeds, with this script.
 
 Per run it prints the worst arm segment, the median (``arm_direction_summary``, the measure of
 docs/point_clouds.md, ``evaluate`` and the tests), the frames above 12 deg, the longest time
-above 45 deg, the wall time per frame (median, p95) and the frames the fit re-initialised;
+above 45 deg, the wall time per frame (median, p95), the frames the fit re-initialised, the
+command's penetrating frames over every link pair on the meshes and ``evaluate``'s CoM margin
+over the run's recorded contacts (both ``evaluate``'s own measures);
 then per clip the worst over the seeds, and over everything the mean of the worst and which
 clips stay within 12 deg on every run. Renderings are cached (``--cache``): the same clip,
 length and render seed are rendered once.

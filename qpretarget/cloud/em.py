@@ -238,6 +238,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         #: The command with the robot's links apart (:mod:`.command`, ``self_collision``),
         #: its CoM kept over its soles while they are moved apart (``stability.mode: qp``).
         self.command = CommandProjection(self.robot, cfg.self_collision)
+        self._command_data = self.robot.model.createData()
         self._command_rows = (
             StabilityRows(self.robot, margin=st.margin, region=st.region)
             if st.mode == "qp" and cfg.self_collision is not None
@@ -999,6 +1000,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
                 log=[],
                 time=time.perf_counter() - t0,
                 rule="",
+                command_steps=0,
             )
         log: list[IterationLog] = []
         q_prev = self.history[-1] if self.history else None
@@ -1084,7 +1086,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         """
         if self.command.constraint is None:
             return q_robot, np.nan
-        data = self.robot.model.createData()
+        data = self._command_data
         pin.framesForwardKinematics(self.robot.model, data, q_robot)
         soles = [
             (fid, data.oMf[fid].copy())

@@ -274,7 +274,7 @@ def test_bend_and_scoop_at_the_sensor_rate(g1, mocap):
     """Issue 23's acceptance on a second clip: CMU 02_06 (bend, scoop, lift), its
     first 1.5 s at 30 Hz as ``make-cloud`` renders it, shipped config.
 
-    Measured: worst arm segment 10.9 deg with the command kept clear of self-collision (config
+    Measured: worst arm segment 10.8 deg with the command kept clear of self-collision (config
     ``self_collision``: 37 of 51 frames moved off the fit, none penetrating on the meshes;
     without it 10.5 deg and 36 frames with a wrist up to 42.7 mm into a hip). Before (stop 47):
     10.5 deg (left upper arm; 10.2 without the silhouette pulls;
