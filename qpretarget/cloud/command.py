@@ -43,7 +43,7 @@ whose hands pass where G1's hips are, and bend-and-scoop's arms were lost (worst
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -97,10 +97,10 @@ SEGMENTS: tuple[tuple[str, str], ...] = (
     ),
 )
 #: Weight of the joints' own distance to the fit's (times the number of joints each moves)
-#: against the key points' [m^2/rad^2]: 1 cm of a key point weighs like 0.1 rad of a limb's end
-#: joint (it settles what the key points leave free: a wrist's roll).
-KEY_POINT_REGULARIZATION = 1e-2
-#: Weight of a supporting sole's pose error against the key points' (its placement is held).
+#: against the segments' turns [1/rad^2 per rad^2]: it settles what the segments leave free
+#: (a wrist's roll).
+JOINT_REGULARIZATION = 1e-2
+#: Weight of a supporting sole's pose error against the segments' (its placement is held).
 SOLE_WEIGHT = 1e4
 #: Largest change of a coordinate in one step [rad, m]: the rows are first order.
 STEP_BOUND = 0.1
@@ -146,7 +146,6 @@ class CommandProjection:
             # optional and the robot has no collision geometry: nothing to keep apart
             self.n_rows = 0 if self.constraint.disabled else self.constraint.n_rows
         self.state = RobotState(robot)
-        self._target = robot.model.createData()
         #: The robot's body segments between its key points (:data:`SEGMENTS` of its
         #: ``keyframes``), whose vectors follow the fit's: (parent frame, child frame).
         kf = robot.keyframes
@@ -215,11 +214,11 @@ class CommandProjection:
         self,
         q_target: np.ndarray,
         q_start: np.ndarray | None,
-        soles: Sequence[tuple[int, pin.SE3]],
+        soles: Sequence[int],
         q_min: np.ndarray,
         q_max: np.ndarray,
         solver: Any,
-        balance: BalanceRows | None = None,
+        balance: Callable[[np.ndarray], BalanceRows | None] | None = None,
     ) -> tuple[np.ndarray, float]:
         r"""The command nearest the fit's configuration ``q_target`` with its links apart.
 
@@ -234,18 +233,19 @@ class CommandProjection:
             + w_f \sum_f \|J_f \Delta - e_f\|^2
             + \epsilon\, (\Delta - \delta)^\top W (\Delta - \delta)
 
-        under the rows of :meth:`linearize`, ``balance``'s rows (the CoM over the supporting
-        soles' polygon, :meth:`.stability.StabilityRows.rows`, Wang 2017 eq. 18-19, each
-        bound at least 0: moving the links apart must not tip the robot, nor move a CoM that
-        is outside, as in a walk, further out), the joint limits and
+        under the rows of :meth:`linearize`, the rows of ``balance(q_target)`` (asked only
+        when the links must be moved; ``None``: none; the CoM over the supporting soles'
+        polygon, :meth:`.stability.StabilityRows.rows`, Wang 2017 eq. 18-19, each bound at
+        least 0: moving the links apart must not tip the robot, nor move a CoM that is
+        outside, as in a walk, further out), the joint limits and
         :math:`|\Delta_j| \le` :data:`STEP_BOUND`: :math:`e_s` the segments' vector errors
         to the target's (weights
-        :math:`w_s` = 1/length², module docstring), :math:`e_f` the supporting soles'
-        (``soles``: frame id, placement) pose errors (:math:`w_f` = :data:`SOLE_WEIGHT`),
-        :math:`\delta = q_{target} \ominus q`, :math:`\epsilon` =
-        :data:`KEY_POINT_REGULARIZATION`. A step whose rows cannot all be met within the
-        bound (a start deep inside several pairs) asks half as much of the pairs it violates,
-        up to :data:`PART_HALVINGS` times, then only that they get no deeper.
+        :math:`w_s` = 1/length², module docstring), :math:`e_f` the pose errors of the
+        supporting soles (``soles``: frame ids) to their placements in ``q_target``
+        (:math:`w_f` = :data:`SOLE_WEIGHT`), :math:`\delta = q_{target} \ominus q`,
+        :math:`\epsilon` = :data:`JOINT_REGULARIZATION`. A step whose rows cannot all be met
+        within the bound (a start deep inside several pairs) asks half as much of the pairs it
+        violates, up to :data:`PART_HALVINGS` times, then only that they get no deeper.
 
         Returns:
             ``(q, gap)``: the command and its smallest :math:`d - d_s` [m] (negative: a pair
@@ -257,11 +257,12 @@ class CommandProjection:
         if gap >= -CLEAR_TOLERANCE:
             return q_target, gap
         robot, model = self.robot, self.robot.model
+        oMf = self.state.data.oMf  # at q_target
+        seg_targets = [oMf[b].translation - oMf[a].translation for a, b in self._segments]
+        placed = [(f, oMf[f].copy()) for f in soles]
+        rows = None if balance is None else balance(q_target)
         nv, k = robot.nv, self.n_rows
-        nb = 0 if balance is None else balance.n_rows
-        data = self._target
-        pin.framesForwardKinematics(model, data, q_target)
-        seg_targets = [data.oMf[b].translation - data.oMf[a].translation for a, b in self._segments]
+        nb = 0 if rows is None else rows.n_rows
         starts = [q_target] if q_start is None else [q_start]
         if q_start is not None and previous is not None:
             jump = np.abs(pin.difference(model, previous, q_target)[robot.joint_v_index])
@@ -270,7 +271,7 @@ class CommandProjection:
         qp = QPProblem(nv, k + nb)
         best: tuple[np.ndarray, float] | None = None
         for q in starts:
-            q, gap = self._steps(q, q_target, seg_targets, soles, q_min, q_max, solver, balance, qp)
+            q, gap = self._steps(q, q_target, seg_targets, placed, q_min, q_max, solver, rows, qp)
             if best is None or gap > best[1]:
                 best = (q, gap)
             if gap >= -CLEAR_TOLERANCE:
@@ -294,7 +295,7 @@ class CommandProjection:
         robot, model = self.robot, self.robot.model
         k = self.n_rows
         qi, vi = robot.joint_q_index, robot.joint_v_index
-        reg = KEY_POINT_REGULARIZATION * self._weights
+        reg = JOINT_REGULARIZATION * self._weights
         gap = self.linearize(q)
         for _ in range(FOLLOW_STEPS):
             delta = pin.difference(model, q, q_target)
@@ -321,14 +322,14 @@ class CommandProjection:
             qp.lb[vi] = np.maximum(np.minimum(q_min[qi] - q[qi], 0.0), -STEP_BOUND)
             qp.ub[vi] = np.minimum(np.maximum(q_max[qi] - q[qi], 0.0), STEP_BOUND)
             sol = solver.solve(qp)
-            for _ in range(PART_HALVINGS + 1):
+            for halving in range(PART_HALVINGS + 1):
                 if sol.x is not None and np.all(np.isfinite(sol.x)):
                     break
                 # Pairs too deep to part by recovery_speed at once within the step bound (a
                 # link pressed into two others from both sides): ask half as much of them,
                 # at last only that they go no deeper.
                 inside = qp.u < 0.0
-                qp.u[inside] = 0.5 * qp.u[inside] if _ < PART_HALVINGS - 1 else 0.0
+                qp.u[inside] = 0.5 * qp.u[inside] if halving < PART_HALVINGS - 1 else 0.0
                 sol = solver.solve(qp)
             if sol.x is None or not np.all(np.isfinite(sol.x)):
                 break
@@ -345,7 +346,7 @@ class CommandProjection:
 class BalanceRows(Protocol):
     """The balance :meth:`CommandProjection.follow` keeps.
 
-    :class:`.stability.StabilityRows`, its support set at the command.
+    :class:`.stability.StabilityRows`, its support set at the fit's command.
     """
 
     n_rows: int

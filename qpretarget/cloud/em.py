@@ -238,7 +238,6 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         #: The command with the robot's links apart (:mod:`.command`, ``self_collision``),
         #: its CoM kept over its soles while they are moved apart (``stability.mode: qp``).
         self.command = CommandProjection(self.robot, cfg.self_collision)
-        self._command_data = self.robot.model.createData()
         self._command_rows = (
             StabilityRows(self.robot, margin=st.margin, region=st.region)
             if st.mode == "qp" and cfg.self_collision is not None
@@ -1086,23 +1085,30 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         """
         if self.command.constraint is None:
             return q_robot, np.nan
-        data = self._command_data
-        pin.framesForwardKinematics(self.robot.model, data, q_robot)
-        soles = [
-            (fid, data.oMf[fid].copy())
-            for fid in (self.placement.sole_frame(f) for f in support.feet)
-        ]
-        balance = None
-        if self._command_rows is not None and support.feet:
-            # Kept over the soles where the fit's command stands balanced; a walk's CoM,
-            # outside its support between steps, is left as the fit has it.
-            self._command_rows.set_support(support, q_robot)
-            if self._command_rows.margin_of(q_robot, full=True) >= 0.0:
-                balance = self._command_rows
+        soles = [self.placement.sole_frame(f) for f in support.feet]
         start = None if self._last is None else self._last.q_robot
         return self.command.follow(
-            q_robot, start, soles, self.q_min, self.q_max, self._solver_clear, balance
+            q_robot,
+            start,
+            soles,
+            self.q_min,
+            self.q_max,
+            self._solver_clear,
+            lambda q: self._command_balance(q, support),
         )
+
+    def _command_balance(self, q_robot: np.ndarray, support: Support) -> StabilityRows | None:
+        """The balance rows of the command's soles, where the fit's command stands balanced.
+
+        ``None`` without a support or ``stability.mode: qp``, and where the command's CoM is
+        outside its soles' polygon already: a walk's CoM, outside its support between steps,
+        is left as the fit has it.
+        """
+        rows = self._command_rows
+        if rows is None or not support.feet:
+            return None
+        rows.set_support(support, q_robot)
+        return rows if rows.margin_of(q_robot, full=True) >= 0.0 else None
 
     def _stages(
         self,
