@@ -12,7 +12,10 @@ Per run it prints the worst arm segment, the median (``arm_direction_summary``, 
 docs/point_clouds.md, ``evaluate`` and the tests), the frames above 12 deg, the longest time
 above 45 deg, the wall time per frame (median, p95), the frames the fit re-initialised, the
 command's penetrating frames over every link pair on the meshes and ``evaluate``'s CoM margin
-over the run's recorded contacts (both ``evaluate``'s own measures);
+over the run's recorded contacts (both ``evaluate``'s own measures), the frames of those
+where the person's CoM is inside the same feet (``cloud/person_com_margin``: the command is
+kept balanced there, so 0 is expected) and the robot's hips against the person's
+(``qpretarget.cloud.measures.hip_offsets``, median and largest);
 then per clip the worst over the seeds, and over everything the mean of the worst and which
 clips stay within 12 deg on every run. Renderings are cached (``--cache``): the same clip,
 length and render seed are rendered once.
@@ -119,10 +122,11 @@ def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> d
     import qpretarget as qp
     from qpretarget.analysis.mesh_audit import audit_self_collision
     from qpretarget.analysis.metrics import compute_metrics
+    from qpretarget.analysis.series import compute_series
     from qpretarget.cloud.config import CloudConfig
     from qpretarget.cloud.em import CloudRetargeter
     from qpretarget.cloud.io import read_cloud_sequence
-    from qpretarget.cloud.measures import arm_direction_errors, arm_direction_summary
+    from qpretarget.cloud.measures import arm_direction_errors, arm_direction_summary, hip_offsets
     from qpretarget.cloud.poser import HumanPoser
 
     seq = read_cloud_sequence(_rendering(clip, frames, render_seed, Path(cache), lead_in_speed))
@@ -135,6 +139,9 @@ def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> d
     summary.pop("per_segment_worst_deg")
     audit = audit_self_collision(g1, traj.q)  # every link pair, on the meshes (evaluate's)
     support = compute_metrics(traj, per_frame=False)["support"]  # evaluate's CoM margin
+    margin = compute_series(traj).com_margin  # ... per frame, against the person's balance
+    person = np.array([r.person_com_margin for r in results])
+    hips = hip_offsets(g1, traj.q, HumanPoser(), seq.meta["human_q"])
     return {
         "clip": clip,
         "render_seed": render_seed,
@@ -148,6 +155,9 @@ def _run(job: tuple[str, int, int, int, str, list[str], str, float | None]) -> d
         "min_pair_distance_mm": audit.min_distance_mm,
         "min_com_margin_mm": 1000.0 * (support["min_com_margin_m"] or np.nan),
         "frames_com_outside": support["frames_com_outside"],
+        "frames_com_outside_person_inside": int(np.sum((margin < -1e-4) & (person >= 0.0))),
+        "hips_offset_mm_median": 1000.0 * float(np.median(hips)),
+        "hips_offset_mm_max": 1000.0 * float(hips.max()),
     }
 
 
@@ -202,7 +212,9 @@ def main() -> None:
                 f"{row['ms_median']:.1f} / {row['ms_p95']:.0f} ms, "
                 f"{row['reinitialised']} re-initialised, {row['penetrating_frames']} frames "
                 f"penetrating (min {row['min_pair_distance_mm']:.1f} mm), CoM margin "
-                f"{row['min_com_margin_mm']:.1f} mm ({row['frames_com_outside']} frames outside)",
+                f"{row['min_com_margin_mm']:.1f} mm ({row['frames_com_outside']} frames outside, "
+                f"{row['frames_com_outside_person_inside']} where the person is inside), hips "
+                f"{row['hips_offset_mm_median']:.0f} / {row['hips_offset_mm_max']:.0f} mm",
                 flush=True,
             )
     print(f"\n{len(rows)} runs in {time.perf_counter() - t0:.0f} s")
@@ -219,7 +231,10 @@ def main() -> None:
             f"frames {sum(r['penetrating_frames'] for r in mine)} (min "
             f"{min(r['min_pair_distance_mm'] for r in mine):.1f} mm), CoM margin min "
             f"{min(r['min_com_margin_mm'] for r in mine):.1f} mm, frames outside "
-            f"{sum(r['frames_com_outside'] for r in mine)}"
+            f"{sum(r['frames_com_outside'] for r in mine)} "
+            f"({sum(r['frames_com_outside_person_inside'] for r in mine)} where the person is "
+            f"inside), hips median {np.mean([r['hips_offset_mm_median'] for r in mine]):.0f} mm "
+            f"(max {max(r['hips_offset_mm_max'] for r in mine):.0f})"
         )
     within = [c for c in args.clips if all(r["worst_deg"] <= 12.0 for r in rows if r["clip"] == c)]
     print(f"mean of the worst {np.mean(means):.2f} deg; within 12 deg on every run: "

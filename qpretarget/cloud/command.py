@@ -114,6 +114,9 @@ FOLLOW_STEPS = 8
 #: Halvings of what a step asks of the pairs inside their safety distance when it cannot
 #: be met within the step bound (then: no deeper).
 PART_HALVINGS = 3
+#: A sole farther than this from its placement [m, rad] is moved back onto it (a leg that
+#: cannot reach it alone: the body moves too).
+SOLE_TOLERANCE = (1e-3, 1e-2)
 #: A step smaller than this on every coordinate ends them [rad, m].
 FOLLOW_TOLERANCE = 1e-3
 #: A pair this far inside its safety distance [m] counts as clear (the rows' linearization
@@ -214,17 +217,20 @@ class CommandProjection:
         self,
         q_target: np.ndarray,
         q_start: np.ndarray | None,
-        soles: Sequence[int],
+        soles: Sequence[tuple[int, pin.SE3]],
         q_min: np.ndarray,
         q_max: np.ndarray,
         solver: Any,
-        balance: Callable[[np.ndarray], BalanceRows | None] | None = None,
+        balance: Callable[[np.ndarray], tuple[BalanceRows, bool] | None] | None = None,
     ) -> tuple[np.ndarray, float]:
-        r"""The command nearest the fit's configuration ``q_target`` with its links apart.
+        r"""The command nearest the fit's configuration ``q_target`` that the robot can hold.
 
-        ``q_target`` itself when they are. Otherwise Gauss-Newton steps from ``q_start`` (the
-        last frame's command, clear: the steps never enter a pair; from ``q_target`` when it
-        is ``None``; first from ``q_target`` and then, if that cannot clear every pair, from
+        ``q_target`` itself when its links are apart, its soles (``soles``: sole frame id and
+        placement) on their placements (within :data:`SOLE_TOLERANCE`) and, where
+        ``balance(q_target)`` says the robot must balance (``(rows, True)``), its CoM over
+        their polygon. Otherwise Gauss-Newton steps from ``q_target`` when its links are
+        apart, else from ``q_start`` (the last frame's command, clear: the steps never enter
+        a pair; first from ``q_target`` and then, if that cannot clear every pair, from
         ``q_start`` when a joint of the fit jumped more than :data:`FOLLOW_REACH` since the
         last call; the clearest result kept) solve
 
@@ -233,51 +239,61 @@ class CommandProjection:
             + w_f \sum_f \|J_f \Delta - e_f\|^2
             + \epsilon\, (\Delta - \delta)^\top W (\Delta - \delta)
 
-        under the rows of :meth:`linearize`, the rows of ``balance(q_target)`` (asked only
-        when the links must be moved; ``None``: none; the CoM over the supporting soles'
-        polygon, :meth:`.stability.StabilityRows.rows`, Wang 2017 eq. 18-19, each bound at
-        least 0: moving the links apart must not tip the robot, nor move a CoM that is
-        outside, as in a walk, further out), the joint limits and
+        under the rows of :meth:`linearize`, the balance rows (the CoM over the soles'
+        polygon, :meth:`.stability.StabilityRows.rows`, Wang 2017 eq. 18-19; with
+        ``(rows, False)`` each bound at least 0: a CoM the person has outside, as in a walk,
+        goes no further out rather than being pulled in), the joint limits and
         :math:`|\Delta_j| \le` :data:`STEP_BOUND`: :math:`e_s` the segments' vector errors
-        to the target's (weights
-        :math:`w_s` = 1/length², module docstring), :math:`e_f` the pose errors of the
-        supporting soles (``soles``: frame ids) to their placements in ``q_target``
-        (:math:`w_f` = :data:`SOLE_WEIGHT`), :math:`\delta = q_{target} \ominus q`,
-        :math:`\epsilon` = :data:`JOINT_REGULARIZATION`. A step whose rows cannot all be met
-        within the bound (a start deep inside several pairs) asks half as much of the pairs it
-        violates, up to :data:`PART_HALVINGS` times, then only that they get no deeper.
+        to the target's (weights :math:`w_s` = 1/length², module docstring), :math:`e_f` the
+        pose errors of the soles to their placements (:math:`w_f` = :data:`SOLE_WEIGHT`),
+        :math:`\delta = q_{target} \ominus q`, :math:`\epsilon` =
+        :data:`JOINT_REGULARIZATION`. A step whose rows cannot all be met within the bound
+        (a start deep inside several pairs) asks half as much of the rows it violates, up to
+        :data:`PART_HALVINGS` times, then only that they get no worse.
 
         Returns:
             ``(q, gap)``: the command and its smallest :math:`d - d_s` [m] (negative: a pair
-            the steps could not clear).
+            the steps could not clear; inf: no pair checked or none within :math:`d_i`).
         """
         self.steps = 0
         previous, self._previous_target = self._previous_target, q_target
         gap = self.linearize(q_target)
-        if gap >= -CLEAR_TOLERANCE:
+        clear = gap >= -CLEAR_TOLERANCE
+        oMf = self.state.data.oMf  # at q_target
+        off = any(self._sole_off(oMf[f], M) for f, M in soles)
+        held = None if balance is None else balance(q_target)
+        tipped = held is not None and held[1] and held[0].margin_of(q_target, full=True) < 0.0
+        if clear and not off and not tipped:
             return q_target, gap
         robot, model = self.robot, self.robot.model
-        oMf = self.state.data.oMf  # at q_target
         seg_targets = [oMf[b].translation - oMf[a].translation for a, b in self._segments]
-        placed = [(f, oMf[f].copy()) for f in soles]
-        rows = None if balance is None else balance(q_target)
         nv, k = robot.nv, self.n_rows
-        nb = 0 if rows is None else rows.n_rows
-        starts = [q_target] if q_start is None else [q_start]
-        if q_start is not None and previous is not None:
-            jump = np.abs(pin.difference(model, previous, q_target)[robot.joint_v_index])
-            if float(jump.max(initial=0.0)) > FOLLOW_REACH:
-                starts.insert(0, q_target)  # then, if that cannot clear, from the command
+        nb = 0 if held is None else held[0].n_rows
+        if clear:
+            starts = [q_target]
+        else:
+            starts = [q_target] if q_start is None else [q_start]
+            if q_start is not None and previous is not None:
+                jump = np.abs(pin.difference(model, previous, q_target)[robot.joint_v_index])
+                if float(jump.max(initial=0.0)) > FOLLOW_REACH:
+                    starts.insert(0, q_target)  # then, if that cannot clear, from the command
         qp = QPProblem(nv, k + nb)
         best: tuple[np.ndarray, float] | None = None
         for q in starts:
-            q, gap = self._steps(q, q_target, seg_targets, placed, q_min, q_max, solver, rows, qp)
+            q, gap = self._steps(q, q_target, seg_targets, soles, q_min, q_max, solver, held, qp)
             if best is None or gap > best[1]:
                 best = (q, gap)
             if gap >= -CLEAR_TOLERANCE:
                 break
         assert best is not None
         return best
+
+    @staticmethod
+    def _sole_off(M: pin.SE3, target: pin.SE3) -> bool:
+        """Whether a sole at ``M`` is off its placement ``target`` (:data:`SOLE_TOLERANCE`)."""
+        d = float(np.linalg.norm(M.translation - target.translation))
+        a = float(np.linalg.norm(pin.log3(target.rotation @ M.rotation.T)))
+        return d > SOLE_TOLERANCE[0] or a > SOLE_TOLERANCE[1]
 
     def _steps(
         self,
@@ -288,7 +304,7 @@ class CommandProjection:
         q_min: np.ndarray,
         q_max: np.ndarray,
         solver: Any,
-        balance: BalanceRows | None,
+        balance: tuple[BalanceRows, bool] | None,
         qp: QPProblem,
     ) -> tuple[np.ndarray, float]:
         """The Gauss-Newton steps of :meth:`follow` from ``q``; return ``(q, gap)``."""
@@ -314,10 +330,11 @@ class CommandProjection:
             qp.H[...], qp.g[...] = H, g
             qp.C[:k], qp.l[:k], qp.u[:k] = self._C, self._lo, self._up
             if balance is not None:
-                qp.C[k:], qp.l[k:], qp.u[k:] = balance.rows(q)
-                # No further out than the fit's command has it (a walk's CoM leaves the
-                # support: moving the links apart must not tip it, nor pull it back in).
-                np.maximum(qp.u[k:], 0.0, out=qp.u[k:])
+                qp.C[k:], qp.l[k:], qp.u[k:] = balance[0].rows(q)
+                if not balance[1]:
+                    # No further out than the fit's command has it (a walk's CoM leaves the
+                    # support: moving the links apart must not tip it, nor pull it in).
+                    np.maximum(qp.u[k:], 0.0, out=qp.u[k:])
             qp.lb[...], qp.ub[...] = -STEP_BOUND, STEP_BOUND
             qp.lb[vi] = np.maximum(np.minimum(q_min[qi] - q[qi], 0.0), -STEP_BOUND)
             qp.ub[vi] = np.minimum(np.maximum(q_max[qi] - q[qi], 0.0), STEP_BOUND)
@@ -352,6 +369,8 @@ class BalanceRows(Protocol):
     n_rows: int
 
     def rows(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def margin_of(self, q: np.ndarray, *, full: bool = False) -> float: ...
 
 
 __all__ = ["FIT_DEFAULTS", "BalanceRows", "CommandProjection", "fit_spec"]

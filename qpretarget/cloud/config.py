@@ -383,6 +383,11 @@ class StabilityConfig:
             supporting leg's joints put it there under the fitted trunk, which keeps its
             orientation; ``CloudRetargeter.robot_configuration``) or ``rigid`` (the whole
             fitted body turned and moved with the sole).
+        replant_distance: a supporting sole the fit puts farther than this from where it
+            was put down [m] (horizontally) is put down again where the fit has it, that
+            frame not in contact (a shuffle, a step carried low); ``null``: never (before
+            stop 49: the foot stayed where it was put down while it supported).
+        replant_angle: ... or turned by more than this [rad] (a pivot).
     """
 
     mode: str = "qp"
@@ -393,6 +398,8 @@ class StabilityConfig:
     flight_height: float = 0.25
     hip_joints: list[str] | None = None
     plant: str = "leg"
+    replant_distance: float | None = 0.08
+    replant_angle: float = 0.35
 
 
 TOP_KEYS = (
@@ -444,7 +451,17 @@ def _section(cls: type, spec: Any, path: str) -> Any:
             raise ConfigError(
                 f"must be one of {', '.join(choices)}, got {value!r}.", path=f"{path}.{key}"
             )
-        if isinstance(ref, bool):
+        if key == "replant_distance":
+            if value is not None and (
+                isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0
+            ):
+                raise ConfigError(
+                    f"must be a distance > 0 [m] or null (a supporting sole is never put down "
+                    f"again), got {value!r}.",
+                    path=f"{path}.{key}",
+                )
+            value = None if value is None else float(value)
+        elif isinstance(ref, bool):
             if not isinstance(value, bool):
                 raise ConfigError(f"must be true or false, got {value!r}.", path=f"{path}.{key}")
         elif isinstance(ref, int):
@@ -656,6 +673,10 @@ class CloudConfig:
                 ) from None
         if st.margin < 0:
             raise ConfigError("must be >= 0 [m].", path="stability.margin")
+        if not st.replant_angle > 0:
+            raise ConfigError(
+                f"must be > 0 [rad], got {st.replant_angle!r}.", path="stability.replant_angle"
+            )
         if cal.centre_rate is not None and not float(cal.centre_rate) > 0:
             raise ConfigError(
                 f"must be > 0 [Hz] or null (every frame), got {cal.centre_rate!r}.",

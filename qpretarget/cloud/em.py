@@ -122,6 +122,12 @@ from .visibility import Silhouette, behind_cloud, visible_from
 CONTACT_LENGTH = 0.1
 
 
+def _heading(M: pin.SE3) -> float:
+    """Heading [rad] of a frame's x axis in the horizontal plane."""
+    x = M.rotation[:, 0]
+    return math.atan2(x[1], x[0])
+
+
 # ------------------------------------------------------------------------------ results
 @dataclass
 class FrameResult:
@@ -142,7 +148,15 @@ class FrameResult:
             (config ``self_collision``; NaN when off, inf when no pair is within d_i;
             negative: a pair the steps could not clear, :mod:`.command`).
         command_steps: steps that moved the command off the fit's configuration to keep its
-            links apart (:meth:`CloudRetargeter._command`; 0: the fit's was clear).
+            links apart, its soles on their placements and its CoM over them
+            (:meth:`CloudRetargeter._command`; 0: the fit's could be held as it was).
+        contacts: the feet the command stands on: the stance of
+            :meth:`.placement.SolePlacement.configuration` whose soles are on their
+            placements (:data:`CONTACT_TOLERANCE`); the run's ``contacts``.
+        person_com_margin: the person's balance over the same stance [m]: the fitted pose's
+            CoM (the robot's masses) inside the polygon of those feet's fitted soles (NaN
+            without a stance or ``stability.mode: qp``). The command is kept inside its own
+            polygon where this is >= 0 (:meth:`CloudRetargeter._command_balance`).
     """
 
     q_fit: np.ndarray
@@ -158,6 +172,8 @@ class FrameResult:
     rule: str = ""
     clearance: float = np.nan
     command_steps: int = 0
+    contacts: tuple[str, ...] = ()
+    person_com_margin: float = np.nan
 
 
 #: Fewest cloud points (after cropping) a frame is fitted on; with fewer a tracking fit holds
@@ -170,11 +186,8 @@ class TooFewPoints(ConfigError):
 
 
 # ------------------------------------------------------------------------------ the fitter
-#: Largest horizontal speed [m/s] of a sole recorded as in contact in the run
-#: (:meth:`CloudRetargeter._moving_soles`): 2 cm a frame at 10 Hz, 7 mm at 30 Hz. A planted
-#: sole moves by the fit's slip alone (at most 2.4 mm a frame on CMU 14_37 at 30 Hz, 5.0 mm
-#: on CMU 16_15's walk); a walk's swing foot up to 0.74 m a frame.
-STANCE_SPEED = 0.2
+#: Farthest a commanded sole may be from its placement [m, rad] to be recorded in contact.
+CONTACT_TOLERANCE = (0.005, 0.05)
 
 
 class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
@@ -240,7 +253,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         self.command = CommandProjection(self.robot, cfg.self_collision)
         self._command_rows = (
             StabilityRows(self.robot, margin=st.margin, region=st.region)
-            if st.mode == "qp" and cfg.self_collision is not None
+            if st.mode == "qp"
             else None
         )
         self._qp = QPProblem(nv, self._n_rows)
@@ -264,11 +277,18 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         lo, hi = self.q_min[qi], self.q_max[qi]
         self._bounded = np.isfinite(lo) & np.isfinite(hi)
         #: The robot's configuration from the fit (:meth:`robot_configuration`).
-        self.placement = SolePlacement(self.robot, self.template, st.plant)
+        self.placement = SolePlacement(
+            self.robot,
+            self.template,
+            st.plant,
+            replant_distance=st.replant_distance if st.mode != "none" else None,
+            replant_angle=st.replant_angle,
+        )
         self._sole_ids = self.placement.sole_ids  # the fitted soles' frames
         self._contact_data = self.model.createData()
         self._init_recovery()  # em.branch_joints, em.reinit_* (checked)
         self._contact_feet: tuple[str, ...] = ()
+        self._person_margin = np.nan  # the last frame's FrameResult.person_com_margin
         # The frame's cloud normals when computed in the background (_prepare, _take_normals).
         self._normals_job: Callable[[], np.ndarray] | None = None
         self._frame_normals: np.ndarray | None = None
@@ -643,18 +663,18 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
                 k += 3
         return r, Jr
 
-    def _update_anchors(self, q: np.ndarray, support: Support) -> None:
-        """Anchor the soles put down in this frame at their fitted place; free lifted ones."""
-        feet = set(support.feet)
-        self._anchors = {f: a for f, a in self._anchors.items() if f in feet}
-        if not feet - set(self._anchors):
-            return
-        data = self._contact_data
-        pin.framesForwardKinematics(self.model, data, q)
-        for f in feet - set(self._anchors):
-            M = data.oMf[self._sole_ids[f]]
-            x = M.rotation[:, 0]
-            self._anchors[f] = (M.translation[:2].copy(), math.atan2(x[1], x[0]))
+    def _update_anchors(self) -> None:
+        """Anchor the fit's supporting soles where the command stands them.
+
+        The placements of :class:`.placement.SolePlacement` (its stance): a foot put down is
+        anchored where it was put down, a foot put down again (moved) is free for a frame,
+        a lifted one is freed, so the fit and the command agree on where a foot stands.
+        """
+        pl = self.placement
+        self._anchors = {
+            f: (pl.fit_placed[f].translation[:2].copy(), _heading(pl.fit_placed[f]))
+            for f in pl.stance
+        }
 
     def _add_priors(
         self,
@@ -1049,9 +1069,9 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             if self.rows.margin_of(q, full=True) < 0:
                 q, _ = self._restore_balance(q)
         q_robot = self.robot_configuration(q, support)
-        q_robot, clearance = self._command(q_robot, support)
+        q_robot, clearance, contacts = self._command(q_robot, q)
         if self.stability_mode != "none":
-            self._update_anchors(q, support)
+            self._update_anchors()
         margin = np.nan
         if self.stability_mode != "none" and support.feet:
             self.rows.set_support(support, q)
@@ -1073,42 +1093,62 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             rule,
             clearance,
             self.command.steps,
+            contacts,
+            self._person_margin,
         )
         return self._last
 
-    def _command(self, q_robot: np.ndarray, support: Support) -> tuple[np.ndarray, float]:
-        """The command with the robot's links apart (:meth:`.command.CommandProjection.follow`).
+    def _command(
+        self, q_robot: np.ndarray, q_fit: np.ndarray
+    ) -> tuple[np.ndarray, float, tuple[str, ...]]:
+        """The command the robot can hold (:meth:`.command.CommandProjection.follow`).
 
-        The fit's own configuration when its links are apart (or ``self_collision`` is off);
-        its supporting soles stay where the placement put them and, with ``stability.mode:
-        qp``, its CoM over their polygon. Returns ``(q_robot, clearance [m])``.
+        The placed configuration ``q_robot`` when its links are apart (``self_collision``),
+        its stance's soles on their placements and, with ``stability.mode: qp``, its CoM over
+        them where the person's is (:meth:`_command_balance`); otherwise the nearest such.
+        Returns ``(q_robot, clearance [m] (NaN without self_collision), contacts)``: the
+        stance's feet whose soles are on their placements.
         """
-        if self.command.constraint is None:
-            return q_robot, np.nan
-        soles = [self.placement.sole_frame(f) for f in support.feet]
+        pl = self.placement
+        soles = [(pl.sole_frame(f), pl.placed[f]) for f in pl.stance]
         start = None if self._last is None else self._last.q_robot
-        return self.command.follow(
+        self._person_margin = np.nan
+        q, gap = self.command.follow(
             q_robot,
             start,
             soles,
             self.q_min,
             self.q_max,
             self._solver_clear,
-            lambda q: self._command_balance(q, support),
+            lambda qq: self._command_balance(qq, q_fit),
         )
+        contacts = []
+        for f in pl.stance:
+            d, a = pl.sole_error(q, f)
+            if d <= CONTACT_TOLERANCE[0] and a <= CONTACT_TOLERANCE[1]:
+                contacts.append(f)
+        clearance = np.nan if self.command.constraint is None else gap
+        return q, clearance, tuple(contacts)
 
-    def _command_balance(self, q_robot: np.ndarray, support: Support) -> StabilityRows | None:
-        """The balance rows of the command's soles, where the fit's command stands balanced.
+    def _command_balance(
+        self, q_robot: np.ndarray, q_fit: np.ndarray
+    ) -> tuple[StabilityRows, bool] | None:
+        """The balance rows of the command's stance, and whether it must stand balanced.
 
-        ``None`` without a support or ``stability.mode: qp``, and where the command's CoM is
-        outside its soles' polygon already: a walk's CoM, outside its support between steps,
-        is left as the fit has it.
+        ``None`` without a stance or ``stability.mode: qp``. The robot must balance (``True``)
+        where the person does: the fit's CoM over the same feet's fitted soles is inside
+        their polygon (a person standing, reaching, bending). Where it is not (a walk's CoM
+        between steps, a foot just lifted) the command's CoM goes no further out.
         """
         rows = self._command_rows
-        if rows is None or not support.feet:
+        stance = self.placement.stance
+        if rows is None or not stance:
             return None
-        rows.set_support(support, q_robot)
-        return rows if rows.margin_of(q_robot, full=True) >= 0.0 else None
+        sup = Support(list(stance), stance[0])
+        rows.set_support(sup, q_fit)
+        self._person_margin = rows.margin_of(q_fit, full=True)
+        rows.set_support(sup, q_robot)
+        return rows, self._person_margin >= 0.0
 
     def _stages(
         self,
@@ -1239,34 +1279,6 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             bar.close()
         return self.trajectory(sequence, results), results
 
-    def _moving_soles(self, q: np.ndarray, t: np.ndarray, feet: list[str]) -> np.ndarray:
-        r"""(T, F) soles of the commanded robot moving faster than :data:`STANCE_SPEED`.
-
-        The sole's horizontal speed from frame :math:`k` to :math:`k+1` (the last frame: from
-        the one before), :math:`|p_{xy}(k+1) - p_{xy}(k)| / (t_{k+1} - t_k)`. The support the
-        fit works with is decided at each frame's start from the prediction's sole heights,
-        with a hysteresis (:class:`.stability.SupportTracker`: a foot is released only 7 cm
-        above the other), so a foot swung low, as in a walk, stayed "supporting" while it
-        travelled; the run's contacts (what ``evaluate``'s foot slip and support polygon and a
-        trainer's contact labels read) leave such a sole out.
-        """
-        T = len(q)
-        out = np.zeros((T, len(feet)), bool)
-        if T < 2 or not feet:
-            return out
-        model = self.robot.model
-        data = model.createData()
-        ids = [model.getFrameId(self.robot.feet[f].frame) for f in feet]
-        P = np.empty((T, len(feet), 2))
-        for k in range(T):
-            pin.framesForwardKinematics(model, data, q[k])
-            for i, fid in enumerate(ids):
-                P[k, i] = data.oMf[fid].translation[:2]
-        step = np.linalg.norm(np.diff(P, axis=0), axis=2)  # (T-1, F)
-        dt = np.maximum(np.diff(t), 1e-9)[:, None]
-        speed = np.concatenate([step / dt, (step / dt)[-1:]], axis=0)
-        return speed > STANCE_SPEED
-
     def trajectory(self, sequence: CloudSequence, results: list[FrameResult]) -> RobotTrajectory:
         """The run file content (``docs/formats.md``) of fitted frames."""
         robot = self.robot
@@ -1277,10 +1289,9 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             dt = max(t[k] - t[k - 1], 1e-9)
             v[k] = pin.difference(robot.model, q[k - 1], q[k]) / dt
         feet = list(robot.feet)
-        contacts = np.array([[f in r.support.feet for f in feet] for r in results], bool).reshape(
+        contacts = np.array([[f in r.contacts for f in feet] for r in results], bool).reshape(
             len(results), len(feet)
         )
-        contacts &= ~self._moving_soles(q, t, feet)
         robot_spec = self.config.robot
         controller_yaml = yaml.safe_dump(
             {
@@ -1308,6 +1319,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             "cloud/backtracks": np.array([sum(x.backtracks for x in r.log) for r in results]),
             "cloud/clearance": np.array([r.clearance for r in results]),
             "cloud/command_steps": np.array([r.command_steps for r in results]),
+            "cloud/person_com_margin": np.array([r.person_com_margin for r in results]),
         }
         human_q = sequence.meta.get("human_q")  # make-cloud's truth: evaluate scores the arms
         if human_q is not None and np.ndim(human_q) == 2 and len(human_q) >= len(results):

@@ -125,6 +125,30 @@ def arm_direction_summary(errors: np.ndarray, t: np.ndarray) -> dict[str, Any]:
     }
 
 
+def hip_offsets(
+    robot: RobotModel, q_robot: np.ndarray, poser: HumanPoser, q_human: np.ndarray
+) -> np.ndarray:
+    r"""(T,) horizontal distance [m] between the robot's and the person's hips.
+
+    The midpoint of the hip key points, :math:`\| (h^{robot}_{xy} - h^{person}_{xy}) \|` with
+    :math:`h = (p_{left\_hip} + p_{right\_hip}) / 2` (the robot's ``keyframes``, the human
+    model's key points): where the robot stands and travels against the person, in the world
+    both are given in (the clouds' frame). Robots of another size stand their hips elsewhere
+    over the same feet; on G1 and the human model a standing pose reads 1-5 cm.
+    """
+    kf = robot.keyframes
+    ids = [robot.frame_id(kf["left_hip"]), robot.frame_id(kf["right_hip"])]
+    data = robot.model.createData()
+    out = np.empty(len(q_robot))
+    for k, q in enumerate(np.asarray(q_robot, float)):
+        pin.framesForwardKinematics(robot.model, data, q)
+        mine = 0.5 * (data.oMf[ids[0]].translation + data.oMf[ids[1]].translation)
+        person = poser.model_keypoints(q_human[k])
+        theirs = 0.5 * (person["left_hip"] + person["right_hip"])
+        out[k] = float(np.linalg.norm(mine[:2] - theirs[:2]))
+    return out
+
+
 def run_arm_direction_errors(
     traj: RobotTrajectory, robot: RobotModel | None = None
 ) -> np.ndarray | None:
@@ -296,6 +320,7 @@ __all__ = [
     "arm_direction_bound",
     "arm_direction_errors",
     "arm_direction_summary",
+    "hip_offsets",
     "longest_run_above",
     "run_arm_direction_errors",
 ]

@@ -2,9 +2,9 @@
 r"""The robot's stance from the fitted pose: its supporting soles flat on the floor.
 
 The EM fit (:mod:`.em`) gives the person's pose with the robot's joints, its soles wherever the
-cloud put them; the command is that pose with the primary sole flat on the floor (z = 0), kept
-where it was put down while it supports, and the other supporting soles held where they were put
-down (:class:`SolePlacement`, ``stability.plant``).
+cloud put them; the command is that pose with its supporting soles flat on the floor (z = 0),
+each kept where it was put down while it supports and the fit keeps it near there
+(:class:`SolePlacement`, ``stability.plant``, ``stability.replant_*``).
 """
 
 from __future__ import annotations
@@ -37,15 +37,27 @@ class SolePlacement:
         template: the fitted template (its model and data give the fitted soles).
         plant: ``stability.plant``: ``leg`` or ``rigid`` (:meth:`configuration`).
 
-    Keeps the primary sole's placement (:attr:`planted`) and the other supporting soles'
-    (:attr:`held`) from frame to frame; :meth:`reset` forgets them.
+        replant_distance, replant_angle: ``stability.replant_*`` (:meth:`configuration`).
+
+    Keeps the supporting soles' placements (:attr:`placed`) from frame to frame; :meth:`reset`
+    forgets them.
     """
 
-    def __init__(self, robot: RobotModel, template: Template, plant: str) -> None:
+    def __init__(
+        self,
+        robot: RobotModel,
+        template: Template,
+        plant: str,
+        *,
+        replant_distance: float | None = None,
+        replant_angle: float = math.inf,
+    ) -> None:
         self.robot = robot
         self.template = template
         self.model = template.model
         self.plant = plant
+        self.replant_distance = replant_distance
+        self.replant_angle = float(replant_angle)
         #: foot -> its sole frame in the template's model (the fitted soles).
         self.sole_ids = {f: self.model.getFrameId(d.frame) for f, d in robot.feet.items()}
         self._robot_data = robot.model.createData()  # the robot's kinematics
@@ -53,23 +65,62 @@ class SolePlacement:
 
     def reset(self) -> None:
         """Forget the placements of the soles (a new run)."""
-        #: The primary foot and its sole's placement, kept while it stays the primary support.
-        self.planted: tuple[str, pin.SE3] | None = None
-        #: Supporting feet other than the primary -> their sole placement, held while they
-        #: support (``stability.plant: leg``).
-        self.held: dict[str, pin.SE3] = {}
+        #: Supporting foot -> its sole's placement on the floor (z = 0, flat, the fitted
+        #: sole's x, y and heading when it was put down), kept while it supports.
+        self.placed: dict[str, pin.SE3] = {}
+        #: ... and the fitted (person-sized) sole's, laid flat, at the same moment: the fit's
+        #: contact anchors (``CloudRetargeter._update_anchors``).
+        self.fit_placed: dict[str, pin.SE3] = {}
+        #: The feet the last :meth:`configuration` stood on their placements (its stance:
+        #: the support less the feet put down again that frame), the first the primary.
+        self.stance: tuple[str, ...] = ()
+        #: The supporting feet the last :meth:`configuration` put down again (moved).
+        self.moved: tuple[str, ...] = ()
+        self._primary: str | None = None
         #: foot -> (sole frame, leg's configuration and velocity indices): :meth:`_leg`.
         self._legs: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
 
-    def configuration(self, q_fit: np.ndarray, support: Support) -> np.ndarray:
-        r"""Robot configuration: the fitted joints, the primary sole flat on the floor (z = 0).
+    @staticmethod
+    def flat(M: pin.SE3) -> pin.SE3:
+        """``M`` laid flat on the floor: its x, y and heading, z = 0, no tilt."""
+        R = M.rotation
+        yaw = math.atan2(R[1, 0], R[0, 0])
+        return pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, yaw), np.array([*M.translation[:2], 0.0]))
 
-        While the same foot stays the primary support its sole keeps its first placement (no
-        slip); a new primary foot is put down under the fitted model's sole (x, y and heading).
-        With ``stability.plant: rigid`` the whole fitted body is turned and moved with its
-        sole onto that placement, :math:`M_{base}' = M_{target} M_{sole}^{-1} M_{base}`; with
-        ``leg`` (default) the trunk keeps its fitted orientation and the supporting leg's
-        joints put the sole there (:meth:`_plant_leg`).
+    def _far(self, placed: pin.SE3, fitted: pin.SE3) -> bool:
+        """Whether the fitted sole left its placement (``stability.replant_*``)."""
+        if self.replant_distance is None:
+            return False
+        d = float(np.linalg.norm(fitted.translation[:2] - placed.translation[:2]))
+        turn = abs(pin.log3(fitted.rotation @ placed.rotation.T)[2])
+        return d > self.replant_distance or turn > self.replant_angle
+
+    def configuration(self, q_fit: np.ndarray, support: Support) -> np.ndarray:
+        r"""Robot configuration: the fitted joints, the supporting soles flat on the floor.
+
+        **The stance.** A supporting foot is put down where the robot's sole is at the fitted
+        configuration (G1's own leg at the fitted angles, its pelvis where the person's is),
+        laid flat on the floor (x, y, heading; z = 0, :meth:`flat`), and kept there while it
+        supports (no slip), unless the fitted configuration puts it farther than
+        ``stability.replant_distance`` or turns it by more than ``stability.replant_angle``:
+        then it is put down again there and, that frame, is not part of the stance (a foot
+        shuffled, pivoted or swung low, :attr:`moved`). G1's soles, not the person's: a
+        robot with shorter legs stands narrower under the same hips (a boxer's wide stance
+        put G1's feet under the person's and its hips 20 cm from theirs), and the fit's
+        balance rows hold the robot's CoM over these soles. The fit's contact term anchors
+        the person-sized soles put down at the same moments (:attr:`fit_placed`,
+        ``CloudRetargeter._update_anchors``), so fit and command agree on when a foot
+        stands and moves. The **primary** foot is the support's (the fit's) when it stands, else the
+        stance's other foot; it keeps its placement from frame to frame, so a change of
+        primary does not move the robot (before stop 49 a new primary was put under the
+        fitted sole, and the command jumped by the fit's drift, up to 0.47 m).
+
+        With ``stability.plant: rigid`` the whole fitted body is turned and moved with the
+        primary sole onto its placement, :math:`M_{base}' = M_{target} M_{sole}^{-1}
+        M_{base}`; with ``leg`` (default) the trunk keeps its fitted orientation and the
+        supporting leg's joints put the sole there (:meth:`_plant_leg`), and the stance's
+        other soles are put on theirs by their own legs (the nearest pose within their
+        limits; where the leg cannot reach, ``CloudRetargeter._command`` moves the body).
 
         Why ``leg``: the cloud barely determines a sole's orientation (a small, partly hidden
         foot), so a rigid placement turned the whole robot, arms included, by the fit's error
@@ -78,35 +129,77 @@ class SolePlacement:
         51.5 deg where the fit's own arms were within 26.6.
         """
         if not self.robot.free_flyer or not self.robot.feet:
+            self.stance, self.moved = (), ()
             return q_fit.copy()
-        foot = (
-            support.primary
-            if support.primary is not None
-            else (self.planted[0] if self.planted is not None else next(iter(self.robot.feet)))
-        )
-        rdata = self._robot_data
+        tdata, rdata = self.template.data, self._robot_data
+        pin.framesForwardKinematics(self.model, tdata, q_fit)
         pin.framesForwardKinematics(self.robot.model, rdata, q_fit)
+        # Where G1's own soles are with its pelvis where the person's is, at the fitted angles
+        # (a smaller robot stands narrower under the same hips; the fit's balance rows hold
+        # its CoM over these soles).
+        fitted = {
+            f: self.flat(rdata.oMf[self.robot.frame_id(self.robot.feet[f].frame)])
+            for f in support.feet
+        }
+        for f in list(self.placed):
+            if f not in fitted:
+                del self.placed[f]
+                del self.fit_placed[f]
+        moved = []
+        for f, M in fitted.items():
+            P = self.placed.get(f)
+            if P is None or self._far(P, M):
+                if P is not None:
+                    moved.append(f)
+                self.placed[f] = M
+                self.fit_placed[f] = self.flat(tdata.oMf[self.sole_ids[f]])
+        stance = [f for f in support.feet if f not in moved]
+        if support.primary in stance:
+            foot = support.primary
+        elif self._primary in stance:
+            foot = self._primary
+        elif stance:
+            foot = stance[0]
+        elif support.primary is not None:
+            foot = support.primary  # the only support moved: it stands where it went
+        else:  # flight: the fitted sole's place, not kept
+            foot = self._primary if self._primary is not None else next(iter(self.robot.feet))
         MF = rdata.oMf[self.robot.frame_id(self.robot.feet[foot].frame)]
-        if self.planted is not None and self.planted[0] == foot and support.primary is not None:
-            target = self.planted[1]
-        else:
-            pin.framesForwardKinematics(self.model, self.template.data, q_fit)
-            fit_sole = self.template.data.oMf[self.sole_ids[foot]]
-            R = fit_sole.rotation
-            yaw = math.atan2(R[1, 0], R[0, 0])
-            target = pin.SE3(
-                pin.rpy.rpyToMatrix(0.0, 0.0, yaw), np.array([*fit_sole.translation[:2], 0.0])
-            )
-            if support.primary is not None:
-                self.planted = (foot, target)
+        target = self.placed[foot] if foot in self.placed else self.flat(MF)
+        self._primary = foot if support.feet else self._primary
+        self.stance = tuple([foot, *(f for f in stance if f != foot)] if foot in stance else [])
+        self.moved = tuple(moved)
         base = pin.XYZQUATToSE3(q_fit[:7])
-        new_base = target * MF.inverse() * base
         if self.plant == "leg":
-            q = self._plant_leg(q_fit, new_base.translation, foot, target)
-            return self._hold_others(q, support, foot)
+            # The trunk moved with the sole's position, not turned with its tilt: a fitted
+            # sole pitched by a raised heel, laid flat by a rigid turn about it, carried the
+            # pelvis 0.9 m above it back by 0.9 sin(pitch) (12 cm at 8 deg, CMU 14_07).
+            position = base.translation + target.translation - MF.translation
+            q = self._plant_leg(q_fit, position, foot, target)
+            for f in (*self.stance[1:], *self.moved):
+                if f != foot:
+                    q = self._plant_leg(q, None, f, self.placed[f])
+            return q
+        new_base = target * MF.inverse() * base
         q = q_fit.copy()
         q[:7] = pin.SE3ToXYZQUAT(new_base)
         return q
+
+    def sole_error(self, q: np.ndarray, foot: str) -> tuple[float, float]:
+        """(distance [m], angle [rad]) of the robot's sole of ``foot`` at ``q`` from its placement.
+
+        ``inf`` for a foot without one.
+        """
+        P = self.placed.get(foot)
+        if P is None:
+            return math.inf, math.inf
+        rdata = self._robot_data
+        pin.framesForwardKinematics(self.robot.model, rdata, q)
+        M = rdata.oMf[self.sole_frame(foot)]
+        return (
+            float(np.linalg.norm(M.translation - P.translation)),
+            float(np.linalg.norm(pin.log3(P.rotation @ M.rotation.T))),
+        )
 
     def _plant_leg(
         self, q_fit: np.ndarray, position: np.ndarray | None, foot: str, target: pin.SE3
@@ -164,28 +257,6 @@ class SolePlacement:
             iv = np.array([model.joints[j].idx_v for j in chain], dtype=int)
             leg = self._legs[foot] = (fid, iq, iv)
         return leg
-
-    def _hold_others(self, q: np.ndarray, support: Support, primary: str) -> np.ndarray:
-        """The other supporting soles held where they were put down, by their legs' joints.
-
-        A sole that starts supporting is held at its pose of that frame; while it supports,
-        its leg's joints keep it there (Newton from the fitted angles, else the bounded
-        least-squares nearest pose within the joint limits, the trunk unmoved): with the trunk
-        kept as fitted, it would otherwise slide with the trunk's small motions over the
-        planted primary sole (29 mm on CMU 14_37).
-        """
-        model, rdata = self.robot.model, self._robot_data
-        others = [f for f in support.feet if f != primary]
-        for f in list(self.held):
-            if f not in others:
-                del self.held[f]
-        for f in others:
-            if f not in self.held:
-                pin.forwardKinematics(model, rdata, q)
-                self.held[f] = pin.updateFramePlacement(model, rdata, self._leg(f)[0]).copy()
-                continue
-            q = self._plant_leg(q, None, f, self.held[f])
-        return q
 
     def _plant_bounded(
         self,

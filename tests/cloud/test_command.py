@@ -59,12 +59,20 @@ def _sole_errors(g1, q0: np.ndarray, q1: np.ndarray, soles: list[int]) -> list[n
     return [pin.log6(d0.oMf[f].actInv(d1.oMf[f])).vector for f in soles]
 
 
+def _placed(g1, q: np.ndarray, soles: list[int]) -> list[tuple[int, pin.SE3]]:
+    """The soles ``soles`` (frame ids) with their placements where ``q`` has them."""
+    data = g1.model.createData()
+    pin.framesForwardKinematics(g1.model, data, q)
+    return [(f, data.oMf[f].copy()) for f in soles]
+
+
 def test_a_penetrating_command_is_cleared_turning_the_segments_the_least(g1, shipped_spec):
     cc = CommandProjection(g1, shipped_spec)
     target = _arm_in_the_hip(g1)
     assert audit_self_collision(g1, target[None]).penetrating_frames == 1
     soles = [g1.frame_id(f.frame) for f in g1.feet.values()]
-    q, gap = cc.follow(target, None, soles, g1.q_min, g1.q_max, make_solver({"name": "daqp"}))
+    q, gap = cc.follow(target, None, _placed(g1, target, soles), g1.q_min, g1.q_max,
+                       make_solver({"name": "daqp"}))  # fmt: skip
     # Every pair at its safety distance on the hulls (conservative: the meshes lie inside)
     # up to the tolerance: d_s = 5 mm, or a quarter of the pair's distance at rest for pairs
     # that sit close by construction.
@@ -138,7 +146,7 @@ def test_moving_the_links_apart_does_not_tip_the_robot(g1, shipped_spec):
 
     target = _arm_in_the_hip(g1)
     right = g1.frame_id(g1.feet["right_foot"].frame)
-    soles = [right]
+    soles = _placed(g1, target, [right])
     support = Support(feet=["right_foot"], primary="right_foot")
     margins = {}
     for with_rows in (False, True):
@@ -148,8 +156,43 @@ def test_moving_the_links_apart_does_not_tip_the_robot(g1, shipped_spec):
         cc = CommandProjection(g1, shipped_spec)
         q, gap = cc.follow(target, None, soles, g1.q_min, g1.q_max,
                            make_solver({"name": "daqp"}),
-                           (lambda q, r=rows: r) if with_rows else None)  # fmt: skip
+                           (lambda q, r=rows: (r, False)) if with_rows else None)  # fmt: skip
         assert gap >= -CLEAR_TOLERANCE
         margins[with_rows] = rows.margin_of(q, full=True) - before
     assert margins[False] < -5e-3, margins  # the arm swung out tips the robot further ...
     assert margins[True] >= -1e-4, margins  # ... which the rows do not let it do
+
+
+def test_a_sole_off_its_placement_is_put_back_and_the_robot_balanced_where_the_person_is(g1):
+    """Without self-collision rows: the right sole's placement 3 cm beside where the target
+    has it (a leg that cannot reach it alone) and the robot on that sole alone with its CoM
+    outside it, the person's balanced there (``(rows, True)``): the steps put the sole on its
+    placement (1 mm, the steps' tolerance) and the CoM inside the sole's polygon (0.1 mm
+    allowed for the linearization), the left foot free."""
+    from qpretarget.cloud.stability import StabilityRows, Support
+
+    cc = CommandProjection(g1, None)
+    target = g1.q_reference.copy()
+    right = g1.frame_id(g1.feet["right_foot"].frame)
+    ((fid, M),) = _placed(g1, target, [right])
+    M.translation[1] -= 0.03
+    rows = StabilityRows(g1, margin=0.01, region="polygon")
+    support = Support(feet=["right_foot"], primary="right_foot")
+    rows.set_support(support, target)
+    assert rows.margin_of(target, full=True) < -0.02  # between the feet, outside the sole
+    q, gap = cc.follow(target, None, [(fid, M)], g1.q_min, g1.q_max,
+                       make_solver({"name": "daqp"}), lambda q: (rows, True))  # fmt: skip
+    assert gap == np.inf and 0 < cc.steps <= FOLLOW_STEPS
+    ((_, got),) = _placed(g1, q, [right])
+    assert np.linalg.norm(got.translation - M.translation) < 1e-3
+    rows.set_support(support, q)
+    assert rows.margin_of(q, full=True) >= -1e-4
+    # The same with the person not balanced there ((rows, False)): the sole put back, the CoM
+    # no further out than the target has it, not pulled in.
+    cc = CommandProjection(g1, None)
+    rows.set_support(support, target)
+    before = rows.margin_of(target, full=True)
+    q, _ = cc.follow(target, None, [(fid, M)], g1.q_min, g1.q_max,
+                     make_solver({"name": "daqp"}), lambda q: (rows, False))  # fmt: skip
+    rows.set_support(support, q)
+    assert before - 1e-4 <= rows.margin_of(q, full=True) < -0.01

@@ -488,8 +488,10 @@ def test_yaw_search_releases_the_soles(g1, g1_meshes, frame):
         rt = CloudRetargeter(cfg, robot=g1, template=T)
         rt.sensor_position = sensor
         rt.history, rt._good, rt._sigmas = [q.copy()], q.copy(), [0.005] * 5
-        rt._update_anchors(q, Support(feet=list(g1.feet), primary=next(iter(g1.feet))))
+        rt.placement.configuration(q, Support(feet=list(g1.feet), primary=next(iter(g1.feet))))
+        rt._update_anchors()  # the soles stand where q has them, the fit anchored there
         held = {f: a[1] for f, a in rt._anchors.items()}
+        assert set(held) == set(g1.feet)
         seen: list[tuple[str, bool]] = []
         trial = rt._trial
 
@@ -503,7 +505,9 @@ def test_yaw_search_releases_the_soles(g1, g1_meshes, frame):
         assert yaw and all(anch == (not release) for anch in yaw), seen
         assert all(anch for tag, anch in seen if not tag.startswith("reinit-yaw")), seen
         assert any(x.stage.startswith("reinit-yaw") for x in res.log)
-        after = {f: rt._anchors[f][1] for f in g1.feet}
+        # Where the command stands them (the placements the fit anchors next): put down
+        # again where the fit turned them, or held.
+        after = {f: _heading(rt.placement.placed[f].rotation) for f in g1.feet}
         for f in g1.feet:
             off = abs(math.degrees(math.remainder(after[f] - person[f], math.tau)))
             kept = abs(math.degrees(math.remainder(after[f] - held[f], math.tau)))

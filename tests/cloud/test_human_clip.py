@@ -399,24 +399,32 @@ def test_boxing_tracked_through_the_whip_turns(g1, mocap):
     assert lost[False] > 0.5, lost
 
 
-def test_a_walk_records_its_swing_feet_as_not_in_contact(g1, mocap):
-    """The run's contacts of a walk (CMU 16_15, 2 s at 10 Hz, a quarter of the Kinect image,
-    the camera moved back to keep the walker in view): a sole the commanded robot moves
-    faster than ``STANCE_SPEED`` is not recorded as in contact, though the fit's support
-    (decided at each frame's start, released only 7 cm above the other foot) still has it.
-    Measured on the full 3 s at 30 Hz: 72 -> 62 / 65 frames in contact, ``evaluate``'s foot
-    slip 706 / 342 mm -> 5.0 / 0.0 mm, the fit the same to the bit (the rule only writes the
-    record). Bounds: no recorded contact moves faster than the threshold (exact: the rule), at
-    least one frame released (the test fails without the rule), and every sole recorded in
-    contact stays within 2 cm over its stance (the fit's anchors hold a planted sole)."""
-    from qpretarget.cloud.em import STANCE_SPEED
+def test_a_walk_steps_with_the_person_balanced_where_the_person_is(g1, mocap):
+    """A walk (CMU 16_15, 2 s at 10 Hz, a quarter of the Kinect image, the camera moved back
+    to keep the walker in view): the robot travels with the person, its soles put down where
+    the fit has them and held there while they support (``stability.replant_*``).
+
+    Bounds: the robot's hips (midpoint) follow the person's within 0.15 m at the median over
+    the frames (``qpretarget.cloud.measures.hip_offsets``) (measured 45-55 mm at 30 Hz on three template samples; 200-260 mm before stop
+    49, when the first placement was kept while the fit's support had the foot, and the robot
+    stayed behind); every sole recorded in contact stays within 1 cm over its stance (each is
+    held on its placement within 5 mm, ``CONTACT_TOLERANCE``); some frame the fit's support
+    has a foot the run does not record (a swing foot carried low); and the command's CoM is
+    outside its recorded soles' polygon only where the person's is outside the same feet's
+    (``cloud/person_com_margin``), 0.1 mm allowed for the linearization."""
+    from qpretarget.analysis.series import compute_series
+    from qpretarget.cloud.measures import hip_offsets
     from qpretarget.cloud.render import clip_cloud_sequence
 
-    syn, _ = clip_cloud_sequence(mocap / "cmu_16_15_walk.bvh", rate=10.0, duration=2.0, downscale=4)
+    syn, poser = clip_cloud_sequence(
+        mocap / "cmu_16_15_walk.bvh", rate=10.0, duration=2.0, downscale=4
+    )
     traj, results = CloudRetargeter(CloudConfig.from_yaml(CONFIG), robot=g1).run(syn.sequence)
     feet = list(g1.feet)
     fitted = np.array([[f in r.support.feet for f in feet] for r in results])
     assert (fitted & ~traj.contacts).any()  # swing feet the fit's support still had
+    offset = hip_offsets(g1, traj.q, poser, syn.q)
+    assert float(np.median(offset)) < 0.15, np.round(offset, 3)
     data = g1.model.createData()
     ids = [g1.model.getFrameId(g1.feet[f].frame) for f in feet]
     P = []
@@ -424,8 +432,6 @@ def test_a_walk_records_its_swing_feet_as_not_in_contact(g1, mocap):
         pin.framesForwardKinematics(g1.model, data, q)
         P.append([data.oMf[i].translation[:2].copy() for i in ids])
     P = np.array(P)
-    speed = np.linalg.norm(np.diff(P, axis=0), axis=2) / np.diff(traj.t)[:, None]
-    assert np.all(speed[traj.contacts[:-1]] <= STANCE_SPEED + 1e-12)
     for i in range(len(feet)):  # each stance (a run of contact frames) stays in place
         on = traj.contacts[:, i]
         start = 0
@@ -437,5 +443,9 @@ def test_a_walk_records_its_swing_feet_as_not_in_contact(g1, mocap):
             while end + 1 < len(on) and on[end + 1]:
                 end += 1
             drift = np.linalg.norm(P[start : end + 1, i] - P[start, i], axis=1).max()
-            assert drift < 0.02, (feet[i], start, end, drift)
+            assert drift < 0.01, (feet[i], start, end, drift)
             start = end + 1
+    margin = compute_series(traj).com_margin
+    person = np.array([r.person_com_margin for r in results])
+    outside = margin < -1e-4
+    assert not np.any(outside & (person >= 0.0)), (margin[outside], person[outside])
