@@ -383,10 +383,12 @@ class StabilityConfig:
             supporting leg's joints put it there under the fitted trunk, which keeps its
             orientation; ``CloudRetargeter.robot_configuration``) or ``rigid`` (the whole
             fitted body turned and moved with the sole).
-        replant_distance: a supporting sole the fit puts farther than this from where it
-            was put down [m] (horizontally) is put down again where the fit has it, that
-            frame not in contact (a shuffle, a step carried low); ``null``: never (before
-            stop 49: the foot stayed where it was put down while it supported).
+        replant_distance: a supporting sole is put down again, that frame not in contact
+            (a shuffle, a step carried low), when the person's fitted sole moves farther
+            than this from where it was put down [m] (horizontally), or G1's sole at the
+            fitted configuration as far from its placement
+            (:meth:`.placement.SolePlacement.configuration`); ``null``: never (before stop
+            49: the foot stayed where it was put down while it supported).
         replant_angle: ... or turned by more than this [rad] (a pivot).
     """
 

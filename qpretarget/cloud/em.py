@@ -135,7 +135,7 @@ class FrameResult:
 
     Attributes:
         q_fit: fitted HUMROB configuration (nq,): the person's pose in the world, robot joints.
-        q_robot: robot configuration (nq,): same joints, primary sole flat on the floor.
+        q_robot: robot configuration (nq,): same joints, the stance's soles flat on the floor.
         sigma2: final variance [m^2]. nll: final NLL of the linear stage (eq. 3).
         iterations: EM iterations (both stages). support: supporting feet.
         com_margin: signed distance of the robot's CoM projection inside the unshrunk support
@@ -186,6 +186,10 @@ class TooFewPoints(ConfigError):
 
 
 # ------------------------------------------------------------------------------ the fitter
+#: Margin [m] the command's CoM is kept inside its stance's polygon where the person is
+#: balanced (the fit keeps ``stability.margin``; the command is only kept inside, with what
+#: the linearization may eat).
+COMMAND_MARGIN = 0.002
 #: Farthest a commanded sole may be from its placement [m, rad] to be recorded in contact.
 CONTACT_TOLERANCE = (0.005, 0.05)
 
@@ -252,7 +256,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         #: its CoM kept over its soles while they are moved apart (``stability.mode: qp``).
         self.command = CommandProjection(self.robot, cfg.self_collision)
         self._command_rows = (
-            StabilityRows(self.robot, margin=st.margin, region=st.region)
+            StabilityRows(self.robot, margin=COMMAND_MARGIN, region=st.region)
             if st.mode == "qp"
             else None
         )
@@ -986,7 +990,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
 
     # ------------------------------------------------------------------ robot output
     def robot_configuration(self, q_fit: np.ndarray, support: Support) -> np.ndarray:
-        """Robot configuration: the fitted joints, the primary sole flat on the floor (z = 0).
+        """Robot configuration: the fitted joints, the supporting soles flat on the floor (z = 0).
 
         :meth:`.placement.SolePlacement.configuration` (``stability.plant``).
         """

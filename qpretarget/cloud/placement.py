@@ -27,6 +27,12 @@ PLANT_TOLERANCE = 1e-9
 PLANT_SOLE_WEIGHT = 100.0
 #: Iterations of that compromise (projected Levenberg-Marquardt).
 PLANT_LM_ITERATIONS = 20
+#: A planted foot is also put down again when G1's own sole at the fitted configuration is
+#: this many replant distances from it (the person's pelvis carried over a foot they keep
+#: planted farther than G1's shorter legs reach: a walk's hips lagged 10 cm at the median
+#: without it; at 2.0, 7-8 cm, and boxing's 10 s lost an arm for 0.70 and 0.87 s on 2 of 15
+#: runs, at 1.0 none over 0.40 s; docs/point_clouds.md, eighteenth round).
+ROBOT_REACH = 1.0
 
 
 class SolePlacement:
@@ -87,13 +93,13 @@ class SolePlacement:
         yaw = math.atan2(R[1, 0], R[0, 0])
         return pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, yaw), np.array([*M.translation[:2], 0.0]))
 
-    def _far(self, placed: pin.SE3, fitted: pin.SE3) -> bool:
-        """Whether the fitted sole left its placement (``stability.replant_*``)."""
+    def _far(self, placed: pin.SE3, fitted: pin.SE3, factor: float = 1.0) -> bool:
+        """Whether a sole at ``fitted`` left ``placed`` (``stability.replant_*`` x ``factor``)."""
         if self.replant_distance is None:
             return False
         d = float(np.linalg.norm(fitted.translation[:2] - placed.translation[:2]))
         turn = abs(pin.log3(fitted.rotation @ placed.rotation.T)[2])
-        return d > self.replant_distance or turn > self.replant_angle
+        return d > factor * self.replant_distance or turn > factor * self.replant_angle
 
     def configuration(self, q_fit: np.ndarray, support: Support) -> np.ndarray:
         r"""Robot configuration: the fitted joints, the supporting soles flat on the floor.
@@ -101,11 +107,13 @@ class SolePlacement:
         **The stance.** A supporting foot is put down where the robot's sole is at the fitted
         configuration (G1's own leg at the fitted angles, its pelvis where the person's is),
         laid flat on the floor (x, y, heading; z = 0, :meth:`flat`), and kept there while it
-        supports (no slip), unless the fitted configuration puts it farther than
-        ``stability.replant_distance`` or turns it by more than ``stability.replant_angle``:
-        then it is put down again there and, that frame, is not part of the stance (a foot
-        shuffled, pivoted or swung low, :attr:`moved`). G1's soles, not the person's: a
-        robot with shorter legs stands narrower under the same hips (a boxer's wide stance
+        supports (no slip), unless the person's fitted sole moves farther than
+        ``stability.replant_distance`` from where it was put down or turns by more than
+        ``stability.replant_angle`` (or G1's sole at the fitted configuration
+        :data:`ROBOT_REACH` times as far from its placement): then it is put down again and,
+        that frame, is not part of the stance (a foot shuffled, pivoted or swung low,
+        :attr:`moved`). G1's soles, not the person's: a robot with shorter legs stands
+        narrower under the same hips (a boxer's wide stance
         put G1's feet under the person's and its hips 20 cm from theirs), and the fit's
         balance rows hold the robot's CoM over these soles. The fit's contact term anchors
         the person-sized soles put down at the same moments (:attr:`fit_placed`,
@@ -147,12 +155,17 @@ class SolePlacement:
                 del self.fit_placed[f]
         moved = []
         for f, M in fitted.items():
-            P = self.placed.get(f)
-            if P is None or self._far(P, M):
+            # The person's foot decides (their sole against where it was put down): a pelvis
+            # moving over planted feet moves G1's sole at the fitted angles too, by what its
+            # shorter legs take differently, and is the legs' to take up; unless that takes
+            # G1's sole as far (ROBOT_REACH: a stride longer than its legs reach).
+            person = self.flat(tdata.oMf[self.sole_ids[f]])
+            P = self.fit_placed.get(f)
+            if P is None or self._far(P, person) or self._far(self.placed[f], M, ROBOT_REACH):
                 if P is not None:
                     moved.append(f)
                 self.placed[f] = M
-                self.fit_placed[f] = self.flat(tdata.oMf[self.sole_ids[f]])
+                self.fit_placed[f] = person
         stance = [f for f in support.feet if f not in moved]
         if support.primary in stance:
             foot = support.primary

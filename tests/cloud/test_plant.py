@@ -92,6 +92,7 @@ def test_a_placement_out_of_the_legs_reach_turns_the_trunk_as_little_as_needed(g
     for plant in ("leg", "rigid"):
         rt = _retargeter(g1, plant, replant_distance=None, replant_angle=3.0)  # held, not re-put
         rt.placement.placed = {"left_foot": target}
+        rt.placement.fit_placed = {"left_foot": fitted}  # the person's foot stood still
         q = rt.robot_configuration(q_fit, support)
         got = _sole(g1, q, "left_foot")
         assert np.abs(pin.log6(got.inverse() * target).vector).max() < 1e-8, plant
