@@ -153,8 +153,8 @@ class FrameResult:
         contacts: the feet the command stands on: the stance of
             :meth:`.placement.SolePlacement.configuration` whose soles are on their
             placements (:data:`CONTACT_TOLERANCE`); the run's ``contacts``.
-        person_com_margin: the person's balance over the same stance [m]: the fitted pose's
-            CoM (the robot's masses) inside the polygon of those feet's fitted soles (NaN
+        person_com_margin: the person's balance over the same stance [m]: at the fitted
+            configuration, the CoM (G1's masses) inside the polygon of those feet's soles (NaN
             without a stance or ``stability.mode: qp``). The command is kept inside its own
             polygon where this is >= 0 (:meth:`CloudRetargeter._command_balance`).
     """
@@ -668,11 +668,12 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         return r, Jr
 
     def _update_anchors(self) -> None:
-        """Anchor the fit's supporting soles where the command stands them.
+        """Anchor the fit's soles of the command's stance where the person put them down.
 
-        The placements of :class:`.placement.SolePlacement` (its stance): a foot put down is
-        anchored where it was put down, a foot put down again (moved) is free for a frame,
-        a lifted one is freed, so the fit and the command agree on where a foot stands.
+        :attr:`.placement.SolePlacement.fit_placed` of its stance (the person-sized soles,
+        laid flat, at the moments the command's feet were put down): a foot put down is
+        anchored there, a foot put down again (moved) is free for a frame, a lifted one is
+        freed, so the fit and the command agree on when a foot stands and moves.
         """
         pl = self.placement
         self._anchors = {
@@ -1140,8 +1141,9 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         """The balance rows of the command's stance, and whether it must stand balanced.
 
         ``None`` without a stance or ``stability.mode: qp``. The robot must balance (``True``)
-        where the person does: the fit's CoM over the same feet's fitted soles is inside
-        their polygon (a person standing, reaching, bending). Where it is not (a walk's CoM
+        where the person does: at the fitted configuration (G1's masses, its soles under the
+        person's pelvis, as the fit's own balance rows) the CoM is inside the same feet's
+        polygon (a person standing, reaching, bending). Where it is not (a walk's CoM
         between steps, a foot just lifted) the command's CoM goes no further out.
         """
         rows = self._command_rows

@@ -71,8 +71,9 @@ class SolePlacement:
 
     def reset(self) -> None:
         """Forget the placements of the soles (a new run)."""
-        #: Supporting foot -> its sole's placement on the floor (z = 0, flat, the fitted
-        #: sole's x, y and heading when it was put down), kept while it supports.
+        #: Supporting foot -> its sole's placement on the floor (z = 0, flat: the x, y and
+        #: heading of G1's sole at the fitted configuration when it was put down), kept
+        #: while it supports.
         self.placed: dict[str, pin.SE3] = {}
         #: ... and the fitted (person-sized) sole's, laid flat, at the same moment: the fit's
         #: contact anchors (``CloudRetargeter._update_anchors``).
@@ -113,15 +114,16 @@ class SolePlacement:
         :data:`ROBOT_REACH` times as far from its placement): then it is put down again and,
         that frame, is not part of the stance (a foot shuffled, pivoted or swung low,
         :attr:`moved`). G1's soles, not the person's: a robot with shorter legs stands
-        narrower under the same hips (a boxer's wide stance
-        put G1's feet under the person's and its hips 20 cm from theirs), and the fit's
-        balance rows hold the robot's CoM over these soles. The fit's contact term anchors
-        the person-sized soles put down at the same moments (:attr:`fit_placed`,
-        ``CloudRetargeter._update_anchors``), so fit and command agree on when a foot
-        stands and moves. The **primary** foot is the support's (the fit's) when it stands, else the
-        stance's other foot; it keeps its placement from frame to frame, so a change of
-        primary does not move the robot (before stop 49 a new primary was put under the
-        fitted sole, and the command jumped by the fit's drift, up to 0.47 m).
+        narrower under the same hips (a boxer's wide stance put G1's feet under the
+        person's and its hips 20 cm from theirs), and the fit's balance rows hold the
+        robot's CoM over these soles. The fit's contact term anchors the person-sized soles
+        put down at the same moments (:attr:`fit_placed`, ``CloudRetargeter._update_anchors``),
+        so fit and command agree on when a foot stands and moves.
+
+        The **primary** foot is the support's (the fit's) when it stands, else the stance's
+        other foot; it keeps its placement from frame to frame, so a change of primary does
+        not move the robot (before stop 49 a new primary was put under the fitted sole, and
+        the command jumped by the fit's drift, up to 0.47 m).
 
         With ``stability.plant: rigid`` the whole fitted body is turned and moved with the
         primary sole onto its placement, :math:`M_{base}' = M_{target} M_{sole}^{-1}
