@@ -122,12 +122,6 @@ from .visibility import Silhouette, behind_cloud, visible_from
 CONTACT_LENGTH = 0.1
 
 
-def _heading(M: pin.SE3) -> float:
-    """Heading [rad] of a frame's x axis in the horizontal plane."""
-    x = M.rotation[:, 0]
-    return math.atan2(x[1], x[0])
-
-
 # ------------------------------------------------------------------------------ results
 @dataclass
 class FrameResult:
@@ -677,7 +671,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         """
         pl = self.placement
         self._anchors = {
-            f: (pl.fit_placed[f].translation[:2].copy(), _heading(pl.fit_placed[f]))
+            f: (pl.fit_placed[f].translation[:2].copy(), pl.heading(pl.fit_placed[f]))
             for f in pl.stance
         }
 
@@ -1127,13 +1121,8 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
             self._solver_clear,
             lambda qq: self._command_balance(qq, q_fit),
         )
-        contacts = []
-        for f in pl.stance:
-            d, a = pl.sole_error(q, f)
-            if d <= CONTACT_TOLERANCE[0] and a <= CONTACT_TOLERANCE[1]:
-                contacts.append(f)
         clearance = np.nan if self.command.constraint is None else gap
-        return q, clearance, tuple(contacts)
+        return q, clearance, pl.on_placements(q, pl.stance, CONTACT_TOLERANCE)
 
     def _command_balance(
         self, q_robot: np.ndarray, q_fit: np.ndarray

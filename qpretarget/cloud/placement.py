@@ -88,11 +88,17 @@ class SolePlacement:
         self._legs: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
 
     @staticmethod
-    def flat(M: pin.SE3) -> pin.SE3:
-        """``M`` laid flat on the floor: its x, y and heading, z = 0, no tilt."""
+    def heading(M: pin.SE3) -> float:
+        """Heading [rad] of ``M``'s x axis in the horizontal plane."""
         R = M.rotation
-        yaw = math.atan2(R[1, 0], R[0, 0])
-        return pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, yaw), np.array([*M.translation[:2], 0.0]))
+        return math.atan2(R[1, 0], R[0, 0])
+
+    @classmethod
+    def flat(cls, M: pin.SE3) -> pin.SE3:
+        """``M`` laid flat on the floor: its x, y and heading, z = 0, no tilt."""
+        return pin.SE3(
+            pin.rpy.rpyToMatrix(0.0, 0.0, cls.heading(M)), np.array([*M.translation[:2], 0.0])
+        )
 
     def _far(self, placed: pin.SE3, fitted: pin.SE3, factor: float = 1.0) -> bool:
         """Whether a sole at ``fitted`` left ``placed`` (``stability.replant_*`` x ``factor``)."""
@@ -200,21 +206,26 @@ class SolePlacement:
         q[:7] = pin.SE3ToXYZQUAT(new_base)
         return q
 
-    def sole_error(self, q: np.ndarray, foot: str) -> tuple[float, float]:
-        """(distance [m], angle [rad]) of the robot's sole of ``foot`` at ``q`` from its placement.
+    def on_placements(
+        self, q: np.ndarray, feet: tuple[str, ...], tolerance: tuple[float, float]
+    ) -> tuple[str, ...]:
+        """The feet of ``feet`` whose robot soles at ``q`` are on their placements.
 
-        ``inf`` for a foot without one.
+        Within ``tolerance`` (distance [m], angle [rad]); one forward-kinematics pass.
         """
-        P = self.placed.get(foot)
-        if P is None:
-            return math.inf, math.inf
+        feet = tuple(f for f in feet if f in self.placed)
+        if not feet:
+            return ()
         rdata = self._robot_data
         pin.framesForwardKinematics(self.robot.model, rdata, q)
-        M = rdata.oMf[self.sole_frame(foot)]
-        return (
-            float(np.linalg.norm(M.translation - P.translation)),
-            float(np.linalg.norm(pin.log3(P.rotation @ M.rotation.T))),
-        )
+        out = []
+        for f in feet:
+            M, P = rdata.oMf[self.sole_frame(f)], self.placed[f]
+            d = float(np.linalg.norm(M.translation - P.translation))
+            a = float(np.linalg.norm(pin.log3(P.rotation @ M.rotation.T)))
+            if d <= tolerance[0] and a <= tolerance[1]:
+                out.append(f)
+        return tuple(out)
 
     def _plant_leg(
         self, q_fit: np.ndarray, position: np.ndarray | None, foot: str, target: pin.SE3
