@@ -12,9 +12,10 @@ Per run it prints the worst arm segment, the median (``arm_direction_summary``, 
 docs/point_clouds.md, ``evaluate`` and the tests), the frames above 12 deg, the longest time
 above 45 deg, the wall time per frame (median, p95), the frames the fit re-initialised, the
 command's penetrating frames over every link pair on the meshes and ``evaluate``'s CoM margin
-over the run's recorded contacts (both ``evaluate``'s own measures), the frames of those
-where the person's CoM is inside the same feet (``cloud/person_com_margin``: the command is
-kept balanced there, so 0 is expected) and the robot's hips against the person's
+over the run's recorded contacts (both ``evaluate``'s own measures; the command is kept
+balanced over its recorded soles on every frame, so 0 frames outside is expected), the frames
+of those where the person's CoM is inside the same feet (``cloud/person_com_margin``) and the
+robot's hips against the person's
 (``qpretarget.cloud.measures.hip_offsets``, median and largest);
 then per clip the worst over the seeds, and over everything the mean of the worst and which
 clips stay within 12 deg on every run. Renderings are cached (``--cache``): the same clip,

@@ -92,7 +92,7 @@ from ..solvers import make_solver
 from ..trajectory import RobotTrajectory
 from .calibration import CalibrationMixin
 from .centres import CentresMixin
-from .command import CommandProjection
+from .command import CLEAR_TOLERANCE, CommandProjection
 from .compiled import overlap
 from .config import CloudConfig
 from .estep import EStep, _Neighbours, e_step, search_coordinates
@@ -150,7 +150,8 @@ class FrameResult:
         person_com_margin: the person's balance over the same stance [m]: at the fitted
             configuration, the CoM (G1's masses) inside the polygon of those feet's soles (NaN
             without a stance or ``stability.mode: qp``). The command is kept inside its own
-            polygon where this is >= 0 (:meth:`CloudRetargeter._command_balance`).
+            polygon on every frame (:meth:`CloudRetargeter._command_balance`); this tells the
+            frames where the person is not balanced over the same feet (a step).
     """
 
     q_fit: np.ndarray
@@ -250,7 +251,7 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
         #: its CoM kept over its soles while they are moved apart (``stability.mode: qp``).
         self.command = CommandProjection(self.robot, cfg.self_collision)
         self._command_rows = (
-            StabilityRows(self.robot, margin=COMMAND_MARGIN, region=st.region)
+            StabilityRows(self.robot, margin=COMMAND_MARGIN, region=st.region, frame="upright")
             if st.mode == "qp"
             else None
         )
@@ -1104,46 +1105,74 @@ class CloudRetargeter(CalibrationMixin, CentresMixin, RecoveryMixin):
 
         The placed configuration ``q_robot`` when its links are apart (``self_collision``),
         its stance's soles on their placements and, with ``stability.mode: qp``, its CoM over
-        them where the person's is (:meth:`_command_balance`); otherwise the nearest such.
-        Returns ``(q_robot, clearance [m] (NaN without self_collision), contacts)``: the
-        stance's feet whose soles are on their placements.
+        their polygon (:meth:`_command_balance`); otherwise the nearest such. Where a stance
+        sole cannot be put on its placement within the steps (a stance wider than G1's legs
+        reach, a pair in the way), the command stands on the soles that are (else on the
+        primary's) and is balanced over those: the feet it records as contacts are the feet
+        its CoM is over. Returns ``(q_robot, clearance [m] (NaN without self_collision),
+        contacts)``: the feet whose soles are on their placements.
         """
         pl = self.placement
-        soles = [(pl.sole_frame(f), pl.placed[f]) for f in pl.stance]
         start = None if self._last is None else self._last.q_robot
         self._person_margin = np.nan
-        q, gap = self.command.follow(
+        stance = tuple(pl.stance)
+        q, gap = self._follow(q_robot, start, q_fit, stance)
+        contacts = pl.on_placements(q, stance, CONTACT_TOLERANCE)
+        if stance and contacts != stance:
+            held = contacts or stance[:1]
+            first, first_gap, steps = q, gap, self.command.steps
+            q, gap = self._follow(q_robot, start, q_fit, held)
+            steps += self.command.steps
+            if gap < -CLEAR_TOLERANCE <= first_gap:
+                # Not clear from the last command: from the first try, which is (the steps
+                # then never enter a pair).
+                q, gap = self._follow(q_robot, first, q_fit, held)
+                steps += self.command.steps
+            self.command.steps = steps  # the frame's, FrameResult.command_steps
+            contacts = pl.on_placements(q, held, CONTACT_TOLERANCE)
+        clearance = np.nan if self.command.constraint is None else gap
+        return q, clearance, contacts
+
+    def _follow(
+        self,
+        q_robot: np.ndarray,
+        start: np.ndarray | None,
+        q_fit: np.ndarray,
+        feet: tuple[str, ...],
+    ) -> tuple[np.ndarray, float]:
+        """:meth:`.command.CommandProjection.follow` with the soles and balance of ``feet``."""
+        pl = self.placement
+        return self.command.follow(
             q_robot,
             start,
-            soles,
+            [(pl.sole_frame(f), pl.placed[f]) for f in feet],
             self.q_min,
             self.q_max,
             self._solver_clear,
-            lambda qq: self._command_balance(qq, q_fit),
+            lambda qq: self._command_balance(qq, q_fit, feet),
         )
-        clearance = np.nan if self.command.constraint is None else gap
-        return q, clearance, pl.on_placements(q, pl.stance, CONTACT_TOLERANCE)
 
     def _command_balance(
-        self, q_robot: np.ndarray, q_fit: np.ndarray
+        self, q_robot: np.ndarray, q_fit: np.ndarray, feet: tuple[str, ...]
     ) -> tuple[StabilityRows, bool] | None:
-        """The balance rows of the command's stance, and whether it must stand balanced.
+        """The balance rows of the command standing on ``feet``: its CoM kept over them.
 
-        ``None`` without a stance or ``stability.mode: qp``. The robot must balance (``True``)
-        where the person does: at the fitted configuration (G1's masses, its soles under the
-        person's pelvis, as the fit's own balance rows) the CoM is inside the same feet's
-        polygon (a person standing, reaching, bending). Where it is not (a walk's CoM
-        between steps, a foot just lifted) the command's CoM goes no further out.
+        ``None`` without feet or ``stability.mode: qp``. The robot balances over its feet
+        on every frame, as the controller's support-polygon constraint does (Wang 2017 eq.
+        18-19): also where the person's CoM is outside the same feet (a walk's weight between
+        steps, a foot just lifted), which a robot cannot stand statically. That person's
+        margin (at the fitted configuration, G1's masses, its soles under the person's
+        pelvis, projected along the vertical) is kept as
+        :attr:`FrameResult.person_com_margin`.
         """
         rows = self._command_rows
-        stance = self.placement.stance
-        if rows is None or not stance:
+        if rows is None or not feet:
             return None
-        sup = Support(list(stance), stance[0])
+        sup = Support(list(feet), feet[0])
         rows.set_support(sup, q_fit)
         self._person_margin = rows.margin_of(q_fit, full=True)
         rows.set_support(sup, q_robot)
-        return rows, self._person_margin >= 0.0
+        return rows, True
 
     def _stages(
         self,

@@ -3,16 +3,30 @@ r"""Static balance of the fitted robot (Wang 2017 IV.B.2, eq. 18-19): QP rows an
 
 The robot is assumed quasi-static, so it balances when the floor projection of its centre of mass
 (eq. 18) lies in the support polygon SP, the convex hull of the supporting soles. The fitted
-configuration has a free-floating base (the person's pose in the camera's world), so the CoM is
-expressed in the frame :math:`F` of the *primary* supporting sole, which the robot keeps flat on
-the floor:
+configuration has a free-floating base (the person's pose in the camera's world, z up from the
+floor), so the CoM is expressed in a frame :math:`F` at the *primary* supporting sole,
+invariant to the base's translation and heading:
 
 .. math::
     c_F = R_F^\top (c - p_F), \qquad
     \frac{\partial c_F}{\partial q} =
-    R_F^\top \left(J_c - J_{F,lin} + [c - p_F]_\times J_{F,ang}\right),
+    R_F^\top \left(J_c - J_{F,lin} + [c - p_F]_\times\, \omega_F(J_{F,ang})\right).
 
-both invariant to the base pose. With SP's edges :math:`n_k^\top x \le o_k` (shrunk by
+``frame="sole"`` (the fit's rows, the paper's): :math:`R_F` the sole's own orientation,
+:math:`\omega_F = J_{F,ang}`; SP and :math:`c_F` are projected along the sole's normal, which
+is the floor's where the sole is flat. ``frame="upright"`` (the command's rows and the person's
+margin): :math:`R_F = R_z(\psi)`, the sole's heading :math:`\psi` kept upright, and
+:math:`\omega_F = e_z\, a^\top J_{F,ang}` with :math:`\dot\psi = a^\top \omega`,
+:math:`a = (-x_z x_x / h^2, -x_z x_y / h^2, 1)` (:math:`x` the sole's x axis in the world,
+:math:`h^2 = x_x^2 + x_y^2`): the projection along the vertical, gravity's, whatever the
+sole's tilt. The two agree on a flat sole (the command's soles are put down flat). On a tilted
+fitted sole they do not: a support sole the fit pitched by 27 deg (boxing, where the cloud
+barely shows the foot) put the sole frame's projection of the CoM 0.6 m x sin 27 deg = 27 cm
+from the vertical's. The fit keeps the sole frame: its rows are a prior of the fit, and with
+the vertical they held the template against the cloud (stop 50, 54 runs: boxing lost, 66-112
+deg worst; chicken 5 of 9 runs above 12 deg; docs/point_clouds.md, *Nineteenth round*).
+
+With SP's edges :math:`n_k^\top x \le o_k` (shrunk by
 ``margin``), each M-step gets the linearized rows
 :math:`n_k^\top (c_{F,xy} + J_{F,xy} \Delta) \le o_k` -- this replaces the paper's after-the-fact
 hip offsets. ``region: inscribed_circle`` uses the paper's stricter region :math:`C_{SP}`, the
@@ -29,6 +43,7 @@ Polygon helpers (convex hull, half-planes) come from :mod:`qpretarget.constraint
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -75,8 +90,23 @@ def chebyshev_centre(normals: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarr
     return best[:2].copy(), float(best[2])
 
 
+_EZ = np.array([0.0, 0.0, 1.0])
+
+
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def upright(R: np.ndarray) -> np.ndarray:
+    r"""The rotation about the vertical with ``R``'s heading, :math:`R_z(\psi)`.
+
+    :math:`\psi = \operatorname{atan2}(R_{10}, R_{00})`; ``R`` itself when it is flat.
+    """
+    h = math.hypot(R[0, 0], R[1, 0])
+    if h < 1e-12:  # the x axis vertical: no heading
+        return np.eye(3)
+    c, s = R[0, 0] / h, R[1, 0] / h
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 @dataclass
@@ -85,7 +115,7 @@ class Support:
 
     Attributes:
         feet: names of the supporting feet (robot foot names); empty in flight.
-        primary: the foot whose sole frame expresses the polygon (kept flat on the floor).
+        primary: the foot at whose sole the polygon is expressed (module docstring).
     """
 
     feet: list[str] = field(default_factory=list)
@@ -144,23 +174,34 @@ class SupportTracker:
 
 
 class StabilityRows:
-    """Linearized CoM-in-support-polygon rows of the robot model, in the primary sole frame.
+    """Linearized CoM-in-support-polygon rows of the robot model, at the primary sole.
 
     Args:
         robot: the robot (its own masses and lengths, not the HUMROB scaling).
         margin: distance kept from every edge [m].
         region: ``"polygon"`` (SP) or ``"inscribed_circle"`` (:math:`C_{SP}`, Wang 2017 eq. 19).
         n_rows: fixed number of rows (inactive rows have infinite bounds).
+        frame: ``"sole"`` (projected along the primary sole's normal, the fit's) or
+            ``"upright"`` (along the vertical) (module docstring).
     """
 
     def __init__(
-        self, robot: RobotModel, *, margin: float = 0.01, region: str = "polygon", n_rows: int = 16
+        self,
+        robot: RobotModel,
+        *,
+        margin: float = 0.01,
+        region: str = "polygon",
+        n_rows: int = 16,
+        frame: str = "sole",
     ) -> None:
         if region not in ("polygon", "inscribed_circle"):
             raise ConfigError(
                 f"region must be 'polygon' or 'inscribed_circle', got {region!r}.",
                 path="stability.region",
             )
+        if frame not in ("sole", "upright"):
+            raise ValueError(f"frame must be 'sole' or 'upright', got {frame!r}")
+        self.frame = frame
         self.robot = robot
         self.model = robot.model
         self.data = robot.model.createData()
@@ -202,12 +243,21 @@ class StabilityRows:
         else:
             c = pin.centerOfMass(self.model, self.data, q, False)
         d = c - M.translation
-        cF = M.rotation.T @ d
+        RF = self._frame_rotation(M.rotation)
+        cF = RF.T @ d
         if not jacobian:
             return cF, None
         Jf = pin.getFrameJacobian(self.model, self.data, fid, LWA)
-        JF = M.rotation.T @ (Jc - Jf[:3] + _skew(d) @ Jf[3:])
-        return cF, JF
+        if self.frame == "sole":
+            return cF, RF.T @ (Jc - Jf[:3] + _skew(d) @ Jf[3:])
+        x = M.rotation[:, 0]
+        h2 = max(float(x[0] * x[0] + x[1] * x[1]), 1e-12)
+        a = np.array([-x[2] * x[0] / h2, -x[2] * x[1] / h2, 1.0])  # heading rate per omega
+        return cF, RF.T @ (Jc - Jf[:3] + np.outer(np.cross(d, _EZ), a @ Jf[3:]))
+
+    def _frame_rotation(self, R: np.ndarray) -> np.ndarray:
+        """:math:`R_F` of a primary sole turned ``R``: its own, or upright (``frame``)."""
+        return R if self.frame == "sole" else upright(R)
 
     # ------------------------------------------------------------------ polygon
     def set_support(self, support: Support, q: np.ndarray) -> None:
@@ -244,17 +294,21 @@ class StabilityRows:
         return n, o
 
     def _hull(self, q: np.ndarray, *, kinematics: bool = True) -> np.ndarray:
-        """Convex hull (K, 2) of the supporting soles in the primary sole frame at ``q``."""
+        """Convex hull (K, 2) of the supporting soles at ``q``.
+
+        Their corners projected into the primary sole's frame (``frame``, module docstring).
+        """
         if kinematics:
             self._kinematics(q, False)
         MF = self.data.oMf[self._sole_ids[self.support.primary]]  # type: ignore[index]
+        RF = self._frame_rotation(MF.rotation)
         pts = []
         for f in self.support.feet:
             x0, x1, y0, y1 = self.robot.feet[f].rectangle
             local = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
             M = self.data.oMf[self._sole_ids[f]]
             world = local @ M.rotation.T + M.translation
-            pts.append(((world - MF.translation) @ MF.rotation)[:, :2])
+            pts.append(((world - MF.translation) @ RF)[:, :2])
         return convex_hull_2d(np.concatenate(pts))
 
     def _refresh(self, q: np.ndarray, *, kinematics: bool = True) -> None:

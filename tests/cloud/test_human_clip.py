@@ -410,8 +410,10 @@ def test_a_walk_steps_with_the_person_balanced_where_the_person_is(g1, mocap):
     stayed behind); every sole recorded in contact stays within 1 cm over its stance (each is
     held on its placement within 5 mm, ``CONTACT_TOLERANCE``); some frame the fit's support
     has a foot the run does not record (a swing foot carried low); and the command's CoM is
-    outside its recorded soles' polygon only where the person's is outside the same feet's
-    (``cloud/person_com_margin``), 0.1 mm allowed for the linearization."""
+    inside its recorded soles' polygon on every frame (``evaluate``'s margin; 0.1 mm allowed
+    for the linearization), also on the frames where the person's is outside the same feet
+    (``cloud/person_com_margin`` < 0, a step: before stop 50 the command went no further out
+    there and ``evaluate`` found it outside)."""
     from qpretarget.analysis.series import compute_series
     from qpretarget.cloud.measures import hip_offsets
     from qpretarget.cloud.render import clip_cloud_sequence
@@ -447,5 +449,7 @@ def test_a_walk_steps_with_the_person_balanced_where_the_person_is(g1, mocap):
             start = end + 1
     margin = compute_series(traj).com_margin
     person = np.array([r.person_com_margin for r in results])
-    outside = margin < -1e-4
-    assert not np.any(outside & (person >= 0.0)), (margin[outside], person[outside])
+    stands = np.isfinite(margin)  # frames with a recorded contact (a lone foot put down
+    assert stands.sum() >= len(margin) // 2, margin  # again that frame is not: a shuffle)
+    assert np.all(margin[stands] >= -1e-4), (np.flatnonzero(margin < -1e-4), margin.min())
+    assert np.any(person < 0.0), person  # a step: the person is not over the same feet

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+import pytest
 
 from qpretarget.cloud.em import CloudRetargeter
 from qpretarget.cloud.stability import (
@@ -26,9 +27,10 @@ def leaning(g1) -> np.ndarray:
     return q
 
 
-def test_com_rows_match_finite_differences(g1):
-    rows = StabilityRows(g1, margin=0.01)
-    q = leaning(g1)
+@pytest.mark.parametrize("frame", ["sole", "upright"])
+def test_com_rows_match_finite_differences(g1, frame):
+    rows = StabilityRows(g1, margin=0.01, frame=frame)
+    q = leaning(g1)  # a tilted sole: the upright frame's heading rate is not omega_z
     rows.set_support(Support(["left_foot"], "left_foot"), q)
     c0, J = rows.com_in_sole(q, jacobian=True)
     eps = 1e-7
@@ -38,8 +40,39 @@ def test_com_rows_match_finite_differences(g1):
         c1, _ = rows.com_in_sole(pin.integrate(g1.model, q, dv))
         # Forward difference, step 1e-7: error ~1e-7 m/rad.
         assert np.allclose((c1 - c0) / eps, J[:, k], atol=1e-6)
-    # Relative to the sole, the base pose does not matter: zero base columns.
-    assert np.abs(J[:, :6]).max() < 1e-9
+    # Relative to the sole the base's position does not matter, nor (sole frame) its turn.
+    assert np.abs(J[:, : 6 if frame == "sole" else 3]).max() < 1e-9
+
+
+def test_balance_is_the_floor_projection(g1):
+    """The CoM and the soles are projected along the vertical, as ``evaluate`` measures the
+    margin (on the world's xy), not along a tilted sole's normal: ``leaning`` turns the base by 0.1 /
+    0.2 rad of roll / pitch, which tilts the sole, and with the sole's own frame the margin
+    was off by the CoM's height times the tilt (a few cm here). Equal to 1e-9 m (rounding);
+    turning the whole robot about the vertical changes nothing (1e-9 m)."""
+    from qpretarget.constraints.support_polygon import polygon_halfplanes
+    from qpretarget.geometry2d import convex_hull_2d
+
+    rows = StabilityRows(g1, margin=0.0, frame="upright")
+    for feet in (["left_foot"], ["left_foot", "right_foot"]):
+        q = leaning(g1)
+        rows.set_support(Support(feet, feet[0]), q)
+        data = g1.model.createData()
+        pin.framesForwardKinematics(g1.model, data, q)
+        corners = []
+        for f in feet:
+            x0, x1, y0, y1 = g1.feet[f].rectangle
+            M = data.oMf[g1.model.getFrameId(g1.feet[f].frame)]
+            local = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+            corners.append((local @ M.rotation.T + M.translation)[:, :2])
+        com = pin.centerOfMass(g1.model, data, q, False)
+        n, o = polygon_halfplanes(convex_hull_2d(np.vstack(corners)), 0.0)
+        world = float(np.min(o - n @ com[:2]))  # the rows' measure, on the world's xy
+        assert abs(rows.margin_of(q, full=True) - world) < 1e-9, (rows.margin_of(q), world)
+        turned = q.copy()
+        base = pin.XYZQUATToSE3(q[:7])
+        turned[:7] = pin.SE3ToXYZQUAT(pin.SE3(pin.rpy.rpyToMatrix(0, 0, 1.2), np.zeros(3)) * base)
+        assert abs(rows.margin_of(turned, full=True) - world) < 1e-9
 
 
 def test_balance_is_restored_by_the_joints(g1, g1_template):
