@@ -31,7 +31,8 @@ forearms, hands, hips, thighs, shanks, from the robot's ``keyframes``): their ve
 the fit's, each weighed by 1/length² so that the objective is in squared angle (the
 arm-direction measure's terms), the supporting soles held (weight :data:`SOLE_WEIGHT`),
 under the rows above, the balance rows of :mod:`.stability` (the CoM kept over the soles'
-polygon, or no further out), the joint limits and :data:`STEP_BOUND` a step. The steps start from
+polygon; ``CloudRetargeter`` asks it on every frame, ``follow`` can also be asked only for no
+further out), the joint limits and :data:`STEP_BOUND` a step. The steps start from
 the last frame's command, which is clear, so that, like the controller's damper, they never
 enter a pair: a hand slides along the hip instead of going through it.
 
@@ -241,8 +242,9 @@ class CommandProjection:
 
         under the rows of :meth:`linearize`, the balance rows (the CoM over the soles'
         polygon, :meth:`.stability.StabilityRows.rows`, Wang 2017 eq. 18-19; with
-        ``(rows, False)`` each bound at least 0: a CoM the person has outside, as in a walk,
-        goes no further out rather than being pulled in), the joint limits and
+        ``(rows, False)`` each bound at least 0: a CoM outside goes no further out rather
+        than being pulled in; ``CloudRetargeter`` asks ``(rows, True)`` since stop 50), the
+        joint limits and
         :math:`|\Delta_j| \le` :data:`STEP_BOUND`: :math:`e_s` the segments' vector errors
         to the target's (weights :math:`w_s` = 1/length², module docstring), :math:`e_f` the
         pose errors of the soles to their placements (:math:`w_f` = :data:`SOLE_WEIGHT`),

@@ -181,9 +181,9 @@ class TooFewPoints(ConfigError):
 
 
 # ------------------------------------------------------------------------------ the fitter
-#: Margin [m] the command's CoM is kept inside its stance's polygon where the person is
-#: balanced (the fit keeps ``stability.margin``; the command is only kept inside, with what
-#: the linearization may eat).
+#: Margin [m] the command's CoM is kept inside the polygon of the soles it stands on, every
+#: frame (the fit keeps ``stability.margin``; the command is only kept inside, with what the
+#: linearization may eat).
 COMMAND_MARGIN = 0.002
 #: Farthest a commanded sole may be from its placement [m, rad] to be recorded in contact.
 CONTACT_TOLERANCE = (0.005, 0.05)
